@@ -1,0 +1,12 @@
+"""Code generation: sympy -> CasADi translation, generated functions, simulation.
+
+Public entry points: :func:`generate` (named CasADi functions of a PHSystem),
+:func:`simulator` / :func:`simulate` (CVODES with restarts at input
+breakpoints, per-state scaling, energy accounts) and
+:func:`discrete_gradient_simulate` (structure-preserving integrator).
+"""
+
+from codegen.functions import GeneratedFunctions, generate
+from codegen.simulator import SimulationResult, Simulator, simulate, simulator
+
+__all__ = ["generate", "GeneratedFunctions", "simulator", "simulate", "Simulator", "SimulationResult"]

@@ -1,0 +1,157 @@
+"""Simulation results: named signals on the time grid, energy and power accounts."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from functools import cached_property
+
+import numpy as np
+
+from codegen.functions import generate
+from phs.errors import InputDataError
+
+
+class SimulationResult:
+    """Trajectory of a system on a time grid, indexed by signal name.
+
+    ``res["seg2.theta"]`` gives a state, input, port output (``"U.i"``),
+    measured output, energy term or one of ``"H"``, ``"dissipated"`` (power),
+    ``"supplied"`` (power ``y^T u``), ``"dHdt"``.
+
+    Parameters
+    ----------
+    system : PHSystem
+    t : array (nt,)
+    x : array (nt, nx)
+    u : array (nt, nu)
+        Inputs evaluated on the grid.
+    p : array (np,)
+        Parameter values used.
+    """
+
+    def __init__(self, system, t, x, u, p, stats: dict | None = None):
+        self.system = system
+        self.t = np.asarray(t, dtype=float)
+        self.x = np.asarray(x, dtype=float)
+        self.u = np.asarray(u, dtype=float).reshape(len(self.t), len(system.inputs))
+        self.p = np.asarray(p, dtype=float)
+        self.stats = dict(stats or {})
+
+    # -- derived signals, evaluated in one vectorised call each -----------------------
+    def _map(self, f):
+        n = len(self.t)
+        fm = f.map(n, "thread", 2) if n > 1 else f
+        outs = fm(self.x.T, self.u.T, np.repeat(self.p[:, None], n, axis=1))
+        outs = outs if isinstance(outs, tuple) else (outs,)
+        return [np.asarray(o).T.reshape(n, -1) for o in outs]
+
+    @cached_property
+    def _power(self):
+        dHdt, diss, sup = self._map(generate(self.system).power_balance)
+        return dHdt[:, 0], diss[:, 0], sup[:, 0]
+
+    @cached_property
+    def H(self) -> np.ndarray:
+        """Hamiltonian along the trajectory."""
+        return self._map(generate(self.system).hamiltonian)[0][:, 0]
+
+    @cached_property
+    def energy_terms(self) -> np.ndarray:
+        return self._map(generate(self.system).energy_terms)[0]
+
+    @property
+    def dissipated(self) -> np.ndarray:
+        """Dissipated power z^T [[R, P], [P^T, S]] z."""
+        return self._power[1]
+
+    @property
+    def supplied(self) -> np.ndarray:
+        """Supplied power y^T u."""
+        return self._power[2]
+
+    @property
+    def dHdt(self) -> np.ndarray:
+        return self._power[0]
+
+    @cached_property
+    def y(self) -> np.ndarray:
+        """Power-conjugate outputs (nt, nu)."""
+        return self._map(generate(self.system).output)[0]
+
+    @cached_property
+    def measured(self) -> np.ndarray:
+        """Measured outputs (nt, n_measured)."""
+        return self._map(generate(self.system).measured)[0]
+
+    @cached_property
+    def dissipator_powers(self) -> dict[str, np.ndarray]:
+        """Power dissipated by each resistive element."""
+        out = self._map(generate(self.system).dissipators)[0]
+        return {label: out[:, k] for k, (label, _) in enumerate(self.system.dissipators)}
+
+    def energy_balance_error(self) -> float:
+        """Relative mismatch of H(T) - H(0) and the trapezoidal integral of supplied - dissipated power."""
+        net = self.supplied - self.dissipated
+        integral = np.concatenate([[0.0], np.cumsum(np.diff(self.t) * (net[1:] + net[:-1]) / 2)])
+        dH = self.H - self.H[0]
+        scale = max(np.max(np.abs(dH)), np.trapezoid(np.abs(self.supplied) + np.abs(self.dissipated), self.t), 1e-300)
+        return float(np.max(np.abs(dH - integral)) / scale)
+
+    # -- names ------------------------------------------------------------------------
+    @property
+    def columns(self) -> list[str]:
+        """Every signal name, in the order used by :meth:`table`."""
+        s = self.system
+        return (s.state_names + s.input_names + s.output_names + s.measured_names
+                + ["H", "dissipated", "supplied"])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        s = self.system
+        if name in s.state_names:
+            return self.x[:, s.state_names.index(name)]
+        if name in s.input_names:
+            return self.u[:, s.input_names.index(name)]
+        if name in s.output_names:
+            return self.y[:, s.output_names.index(name)]
+        if name in s.measured_names:
+            return self.measured[:, s.measured_names.index(name)]
+        if name in ("H", "dissipated", "supplied", "dHdt"):
+            return getattr(self, name)
+        labels = [t.label for t in s.energy_terms]
+        if name in labels:
+            return self.energy_terms[:, labels.index(name)]
+        if name in self.dissipator_powers:
+            return self.dissipator_powers[name]
+        raise KeyError(f"no signal {name!r} in the result of {s.name!r}; known: {', '.join(self.columns)}")
+
+    def table(self) -> tuple[list[str], np.ndarray]:
+        """Header (with ``t`` first) and the (nt, 1 + ncolumns) array of every signal."""
+        cols = self.columns
+        data = np.column_stack([self.t] + [self[c] for c in cols])
+        return ["t"] + cols, data
+
+    def to_csv(self, path) -> None:
+        """Write every signal to CSV atomically (a temporary file renamed into place)."""
+        header, data = self.table()
+        write_csv_atomic(path, header, data)
+
+    def __repr__(self) -> str:
+        return f"SimulationResult({self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g})"
+
+
+def write_csv_atomic(path, header, data) -> None:
+    """Write a CSV file so that either the whole file appears or nothing does."""
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(d):
+        raise InputDataError(f"cannot write {path!r}: directory {d!r} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".csv", dir=d)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            np.savetxt(fh, data, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

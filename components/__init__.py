@@ -1,0 +1,37 @@
+"""The component library: storages, dissipators, sources, couplings and constraints.
+
+Every component returns its port-Hamiltonian piece (:class:`phs.component.Piece`);
+:func:`phs.interconnect` joins them.  Parameters given as numbers become local
+parameters ``{component}.{name}``; give a :class:`phs.Param` to share one.
+"""
+
+from components.electrical import (
+    Capacitor,
+    CurrentSource,
+    DriftBranch,
+    Inductor,
+    Resistor,
+    VariableCapacitor,
+    VoltageSource,
+)
+from components.mechanical import (
+    Damper,
+    ForceSource,
+    Gravity,
+    LinearSpring,
+    Mass,
+    NonlinearSpring,
+    RotationalDamper,
+    RotationalInertia,
+    TorqueSource,
+    TorsionalSpring,
+)
+from components.coupling import Gyrator, Transformer
+from components.constraints import GeometricConstraint, Geometry, geometric_symbol
+
+__all__ = [
+    "Capacitor", "CurrentSource", "DriftBranch", "Inductor", "Resistor", "VariableCapacitor", "VoltageSource",
+    "Damper", "ForceSource", "Gravity", "LinearSpring", "Mass", "NonlinearSpring", "RotationalDamper",
+    "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
+    "GeometricConstraint", "Geometry", "geometric_symbol",
+]

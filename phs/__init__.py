@@ -1,0 +1,47 @@
+"""phs: port-Hamiltonian modelling, simulation, identification and control.
+
+The core (this package without :mod:`phs.workflows`) depends on sympy, numpy
+and scipy only.  Workflows that run models (simulation, identification,
+diagnosis, sweeps) are exposed lazily so ``import phs`` never imports casadi.
+"""
+
+from phs.component import Component, symbol_of_input, symbol_of_state
+from phs.errors import (
+    DomainError,
+    EquilibriumError,
+    InputDataError,
+    InterconnectionError,
+    ModelError,
+    ParameterError,
+    PHSError,
+    SimulationError,
+    UnitError,
+)
+from phs.junctions import bond, parallel, series
+from phs.params import Condition, InputInfo, Measured, Param, StateInfo
+from phs.system import PHSystem
+from phs.interconnect import interconnect
+from phs.equilibrium import equilibrium
+from phs import signals
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Component", "symbol_of_input", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
+    "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
+    "bond", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
+    "interconnect", "equilibrium", "signals", "simulate", "load",
+]
+
+
+def load(path):
+    """Load a system saved with :meth:`PHSystem.save`."""
+    return PHSystem.load(path)
+
+
+def __getattr__(name):
+    if name == "simulate":
+        from codegen.simulator import simulate
+
+        return simulate
+    raise AttributeError(f"module 'phs' has no attribute {name!r}")

@@ -1,0 +1,2 @@
+"""placeholder"""
+def equilibrium(*a, **k): raise NotImplementedError

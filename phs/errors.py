@@ -1,0 +1,71 @@
+"""The project's error types.
+
+Every error raised on bad input is a :class:`PHSError`; its message names the
+culprit (component, port, parameter, state, file, column or row).  Errors that
+collect several problems keep them in ``problems`` and list them all.
+"""
+
+from __future__ import annotations
+
+
+class PHSError(Exception):
+    """Base class of every error the project raises on purpose.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong and where.
+    problems : sequence of str, optional
+        Individual problems when several were collected; they are appended to
+        the message, one per line.
+
+    Examples
+    --------
+    >>> err = PHSError("model 'rc' is invalid", problems=["J not skew", "R not PSD"])
+    >>> print(err)
+    model 'rc' is invalid:
+      - J not skew
+      - R not PSD
+    """
+
+    def __init__(self, message: str, problems: list[str] | tuple[str, ...] = ()):
+        self.problems = tuple(problems)
+        text = message
+        if self.problems:
+            text += ":\n" + "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(text)
+
+
+class ModelError(PHSError, ValueError):
+    """A model (component, system, parameter) is malformed."""
+
+
+class InterconnectionError(ModelError):
+    """A connection is unrealizable: unconnected port, dependent storages, unknown name."""
+
+
+class ParameterError(ModelError, KeyError):
+    """A parameter is unknown, has no value, or is outside its declared range."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return Exception.__str__(self)
+
+
+class UnitError(ModelError):
+    """Declared units are inconsistent (an energy term that is not in joules)."""
+
+
+class DomainError(PHSError, ArithmeticError):
+    """A state left the model's validity domain (for example an arcsin argument above 1)."""
+
+
+class SimulationError(PHSError, RuntimeError):
+    """The integrator failed, or the solution became non-finite."""
+
+
+class InputDataError(PHSError, ValueError):
+    """An input signal, CSV file or command-line argument is malformed."""
+
+
+class EquilibriumError(PHSError, RuntimeError):
+    """No equilibrium could be found for the requested input or target."""

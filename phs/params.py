@@ -1,0 +1,215 @@
+"""Parameters, states and inputs: named symbols with units, values and ranges."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import sympy as sp
+
+from phs.errors import ModelError
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+
+
+def check_name(name: str, what: str) -> str:
+    """Return ``name`` if it is a valid dotted identifier, else raise.
+
+    Examples
+    --------
+    >>> check_name("seg2.theta", "state")
+    'seg2.theta'
+    """
+    if not isinstance(name, str) or not _NAME.match(name) or "__" in name:
+        raise ModelError(
+            f"invalid {what} name {name!r}: use letters, digits and '_' in dot-separated "
+            "parts that do not start with a digit, and no '__' (reserved for C identifiers)"
+        )
+    return name
+
+
+def c_identifier(name: str) -> str:
+    """C-safe identifier of a dotted name (``seg2.theta`` -> ``seg2__theta``).
+
+    Examples
+    --------
+    >>> c_identifier("seg2.theta")
+    'seg2__theta'
+    """
+    return name.replace(".", "__")
+
+
+@dataclass(frozen=True)
+class Param:
+    """A model parameter: a symbol with a value, a unit and a sentence.
+
+    Parameters
+    ----------
+    name : str
+        Dotted name; the paper's symbol for shared physics (``K_b``), prefixed
+        with the component for local ones (``seg2.K_b``).
+    value : float or None
+        Default value (SI units).  ``None`` means the user must supply it.
+    unit : str
+        Unit expression such as ``"N*m/rad"`` (see :mod:`phs.units`).
+    description : str
+        One sentence saying what the parameter is.
+    range : (float, float), optional
+        Physical range used by checks and sampling.  Defaults to a decade
+        either side of a positive value, or ``[-|v|-1, |v|+1]`` otherwise.
+    positive : bool, optional
+        Whether the symbol carries sympy's ``positive`` assumption (used to
+        decide definiteness symbolically).  Defaults to ``value > 0``.
+
+    Examples
+    --------
+    >>> K_b = Param("K_b", 0.04, "N*m/rad", "torsional stiffness of the bottom film")
+    >>> K_b.symbol, K_b.range
+    (K_b, (0.004, 0.4))
+    """
+
+    name: str
+    value: float | None
+    unit: str = "1"
+    description: str = ""
+    range: tuple[float, float] | None = None
+    positive: bool | None = None
+
+    def __post_init__(self) -> None:
+        check_name(self.name, "parameter")
+        if self.value is not None:
+            try:
+                v = float(self.value)
+            except (TypeError, ValueError):
+                raise ModelError(f"parameter {self.name!r}: value {self.value!r} is not a number") from None
+            if not math.isfinite(v):
+                raise ModelError(f"parameter {self.name!r}: value {v} is not finite")
+            object.__setattr__(self, "value", v)
+        if self.positive is None:
+            object.__setattr__(self, "positive", self.value is not None and self.value > 0)
+        if self.range is None:
+            v = self.value
+            if v is None:
+                rng = (0.0, 1.0) if self.positive else (-1.0, 1.0)
+            elif v > 0:
+                rng = (v / 10.0, v * 10.0)
+            else:
+                rng = (-abs(v) - 1.0, abs(v) + 1.0)
+            object.__setattr__(self, "range", rng)
+        lo, hi = (float(r) for r in self.range)
+        if not lo <= hi:
+            raise ModelError(f"parameter {self.name!r}: range [{lo}, {hi}] has lower > upper")
+        object.__setattr__(self, "range", (lo, hi))
+
+    @property
+    def symbol(self) -> sp.Symbol:
+        """The sympy symbol of this parameter."""
+        return param_symbol(self.name, bool(self.positive))
+
+    def with_value(self, value: float) -> Param:
+        """Copy with another value.
+
+        Examples
+        --------
+        >>> Param("R", 1e3, "Ohm").with_value(2e3).value
+        2000.0
+        """
+        return Param(self.name, value, self.unit, self.description, self.range, self.positive)
+
+    def renamed(self, name: str) -> Param:
+        """Copy under another name (used to untie a shared parameter)."""
+        return Param(name, self.value, self.unit, self.description, self.range, self.positive)
+
+
+def param_symbol(name: str, positive: bool) -> sp.Symbol:
+    """Sympy symbol for a parameter name (positive or merely real)."""
+    return sp.Symbol(name, positive=True) if positive else sp.Symbol(name, real=True)
+
+
+def state_symbol(name: str) -> sp.Symbol:
+    """Sympy symbol of a state (always real)."""
+    return sp.Symbol(name, real=True)
+
+
+def input_symbol(name: str) -> sp.Symbol:
+    """Sympy symbol of an input (always real)."""
+    return sp.Symbol(name, real=True)
+
+
+TIME = sp.Symbol("t", real=True)
+"""The time symbol used by input signals."""
+
+
+@dataclass(frozen=True)
+class StateInfo:
+    """A state of a system: name, unit, physical range, scale and meaning.
+
+    ``kind`` is ``"C"`` for displacement-like states (charge, angle, length:
+    the port flow is the state's rate) and ``"I"`` for momentum-like states
+    (the port effort is the state's rate).
+    """
+
+    name: str
+    unit: str = "1"
+    range: tuple[float, float] = (-1.0, 1.0)
+    description: str = ""
+    kind: str = "C"
+    scale: float | None = None
+    owner: str = ""
+
+    @property
+    def symbol(self) -> sp.Symbol:
+        return state_symbol(self.name)
+
+    @property
+    def typical(self) -> float:
+        """Characteristic magnitude used to scale the state in solvers."""
+        if self.scale is not None:
+            return float(self.scale)
+        m = max(abs(self.range[0]), abs(self.range[1]))
+        return m if m > 0 else 1.0
+
+
+@dataclass(frozen=True)
+class InputInfo:
+    """An input of a system and the name of its power-conjugate output."""
+
+    name: str
+    unit: str = "1"
+    output: str = ""
+    output_unit: str = "1"
+    kind: str = "effort"
+    description: str = ""
+    range: tuple[float, float] | None = None
+
+    @property
+    def symbol(self) -> sp.Symbol:
+        return input_symbol(self.name)
+
+
+@dataclass(frozen=True)
+class Condition:
+    """A validity condition ``expr >= 0`` with a label naming where it comes from."""
+
+    label: str
+    expr: sp.Expr
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class EnergyTerm:
+    """One additive term of the Hamiltonian, labelled by the component that stores it."""
+
+    label: str
+    expr: sp.Expr
+
+
+@dataclass(frozen=True)
+class Measured:
+    """A measured output: a named function of state and input (a sensor's reading)."""
+
+    name: str
+    expr: sp.Expr
+    unit: str = "1"
+    description: str = ""

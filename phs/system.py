@@ -1,0 +1,465 @@
+"""The model object: an immutable input-state-output port-Hamiltonian system.
+
+    x' = (J(x) - R(x)) dH/dx + (G(x) - P(x)) u
+    y  = (G(x) + P(x))^T dH/dx + (S(x) + N(x)) u
+
+with J skew-symmetric, [[R, P], [P^T, S]] symmetric positive semidefinite and
+N skew-symmetric, so that dH/dt = -z^T [[R, P], [P^T, S]] z + y^T u <= y^T u
+with z = [dH/dx; u] (van der Schaft).  Measured outputs are any named
+functions of state and input.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from functools import cached_property
+from numbers import Real
+
+import numpy as np
+import sympy as sp
+
+from phs.errors import ModelError, ParameterError
+from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
+
+_NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, "numpy"]
+
+
+def _as_matrix(M, rows: int, cols: int, what: str, problems: list[str]) -> sp.Matrix:
+    if M is None:
+        return sp.zeros(rows, cols)
+    try:
+        M = sp.Matrix(M) if not isinstance(M, sp.MatrixBase) else sp.Matrix(M)
+    except (TypeError, ValueError) as exc:
+        problems.append(f"{what} is not a matrix: {exc}")
+        return sp.zeros(rows, cols)
+    if cols == 0 and M.shape == (rows, 1) and rows == 0:
+        return sp.zeros(rows, cols)
+    if M.shape != (rows, cols):
+        if rows * cols == 0 and len(M) == 0:
+            return sp.zeros(rows, cols)
+        problems.append(f"{what} has shape {M.shape}, expected ({rows}, {cols})")
+        return sp.zeros(rows, cols)
+    return M
+
+
+def _domain_conditions(exprs, label: str) -> list[Condition]:
+    """Validity conditions implied by asin/acos/sqrt/log arguments inside ``exprs``."""
+    out: dict[sp.Expr, Condition] = {}
+    for ex in exprs:
+        for node in sp.preorder_traversal(ex):
+            if isinstance(node, (sp.asin, sp.acos)):
+                a = node.args[0]
+                fn = node.func.__name__
+                out.setdefault(1 - a, Condition(f"{fn} argument <= 1 in {label}", 1 - a, f"{a} <= 1"))
+                out.setdefault(1 + a, Condition(f"{fn} argument >= -1 in {label}", 1 + a, f"{a} >= -1"))
+            elif isinstance(node, sp.log):
+                a = node.args[0]
+                out.setdefault(a, Condition(f"log argument > 0 in {label}", a, f"{a} > 0"))
+            elif node.is_Pow and node.exp.is_Rational and not node.exp.is_Integer and node.exp.q == 2:
+                a = node.base
+                if not a.is_nonnegative:
+                    out.setdefault(a, Condition(f"square-root argument >= 0 in {label}", a, f"{a} >= 0"))
+    return list(out.values())
+
+
+class PHSystem:
+    """An immutable port-Hamiltonian system with named states, inputs and parameters.
+
+    Usually built by :func:`phs.interconnect` from components; it can also be
+    given directly by its matrices.
+
+    Parameters
+    ----------
+    name : str
+        Name used for generated functions.
+    states : sequence of StateInfo or str
+        The state vector in order.
+    H : sympy expression or sequence of EnergyTerm
+        The Hamiltonian (a sum of labelled terms when given as a sequence).
+    J, R : matrix (n x n)
+        Interconnection (skew) and dissipation (symmetric PSD) matrices.
+    G, P : matrix (n x m), optional
+        Input matrix and its resistive cross term.
+    S, N : matrix (m x m), optional
+        Symmetric (resistive) and skew feedthrough.
+    inputs : sequence of InputInfo or str
+        Inputs in order; each names its power-conjugate output.
+    params : sequence of Param
+        Every parameter used in the expressions, with its value.
+    measured : sequence of Measured
+        Named functions of state and input recorded by sensors.
+    conditions : sequence of Condition
+        Validity domain as ``expr >= 0``; arcsin/arccos/sqrt/log arguments are
+        added automatically.
+    dissipators : sequence of (label, {(i, j): expr})
+        Per-element dissipation forms on z = [dH/dx; u] (upper triangle).
+
+    Raises
+    ------
+    ModelError
+        Listing every problem found: shapes, unknown symbols, parameters
+        without value, J not skew-symmetric, R not symmetric, a dissipation
+        matrix with a negative eigenvalue at a sampled point.
+
+    Examples
+    --------
+    >>> q, p = sp.symbols("q p", real=True)
+    >>> k = Param("k", 2.0, "N/m"); m = Param("m", 1.0, "kg")
+    >>> osc = PHSystem("osc", [StateInfo("q", "m"), StateInfo("p", "kg*m/s", kind="I")],
+    ...                H=k.symbol * q**2 / 2 + p**2 / (2 * m.symbol),
+    ...                J=[[0, 1], [-1, 0]], R=sp.zeros(2, 2), params=[k, m])
+    >>> osc.dynamics.T
+    Matrix([[p/m, -k*q]])
+    """
+
+    def __init__(
+        self,
+        name: str,
+        states,
+        H,
+        J,
+        R,
+        G=None,
+        *,
+        P=None,
+        S=None,
+        N=None,
+        inputs=(),
+        params=(),
+        measured=(),
+        conditions=(),
+        dissipators=(),
+        definitions=(),
+        description: str = "",
+        structure: dict | None = None,
+    ):
+        problems: list[str] = []
+        check_name(name, "system")
+        self.name = name
+        self.states = tuple(s if isinstance(s, StateInfo) else StateInfo(check_name(s, "state")) for s in states)
+        self.inputs = tuple(
+            u if isinstance(u, InputInfo) else InputInfo(check_name(u, "input"), output=f"{u}.y") for u in inputs
+        )
+        if isinstance(H, (list, tuple)):
+            self.energy_terms = tuple(H)
+        else:
+            self.energy_terms = (EnergyTerm("H", sp.sympify(H)),)
+        self.H = sp.Add(*[t.expr for t in self.energy_terms])
+        n, m = len(self.states), len(self.inputs)
+        self.J = _as_matrix(J, n, n, "J", problems)
+        self.R = _as_matrix(R, n, n, "R", problems)
+        self.G = _as_matrix(G, n, m, "G", problems)
+        self.P = _as_matrix(P, n, m, "P", problems)
+        self.S = _as_matrix(S, m, m, "S", problems)
+        self.N = _as_matrix(N, m, m, "N", problems)
+        self.params = tuple(params)
+        self.measured = tuple(measured)
+        self.dissipators = tuple(dissipators)
+        self.definitions = tuple(definitions)
+        self.description = description
+        self.structure = dict(structure or {})
+        names = [s.name for s in self.states] + [u.name for u in self.inputs]
+        dup = {x for x in names if names.count(x) > 1}
+        if dup:
+            problems.append(f"names used twice among states and inputs: {sorted(dup)}")
+        pnames = [p.name for p in self.params]
+        dupp = {x for x in pnames if pnames.count(x) > 1}
+        if dupp:
+            problems.append(f"parameters declared twice: {sorted(dupp)}")
+        for p in self.params:
+            if not isinstance(p, Param):
+                problems.append(f"{p!r} is not a Param")
+            elif p.value is None:
+                problems.append(f"parameter {p.name!r} has no value")
+        auto = _domain_conditions(
+            [t.expr for t in self.energy_terms] + list(self.J) + list(self.R) + list(self.G) + [mo.expr for mo in self.measured],
+            name,
+        )
+        self.conditions = tuple(conditions) + tuple(c for c in auto if c.expr not in {k.expr for k in conditions})
+        self._check_symbols(problems)
+        if not problems:
+            self._check_structure(problems)
+        if problems:
+            raise ModelError(f"invalid port-Hamiltonian system {name!r}", problems)
+        self._frozen = True
+
+    # -- immutability -------------------------------------------------------------
+    def __setattr__(self, key, value):
+        if getattr(self, "_frozen", False):
+            raise AttributeError(f"PHSystem is immutable; use with_params() or build a new system (tried to set {key!r})")
+        object.__setattr__(self, key, value)
+
+    # -- symbols --------------------------------------------------------------------
+    @property
+    def x(self) -> list[sp.Symbol]:
+        """State symbols in order."""
+        return [s.symbol for s in self.states]
+
+    @property
+    def u(self) -> list[sp.Symbol]:
+        """Input symbols in order."""
+        return [i.symbol for i in self.inputs]
+
+    @property
+    def p(self) -> list[sp.Symbol]:
+        """Parameter symbols in order."""
+        return [q.symbol for q in self.params]
+
+    @property
+    def state_names(self) -> list[str]:
+        return [s.name for s in self.states]
+
+    @property
+    def input_names(self) -> list[str]:
+        return [i.name for i in self.inputs]
+
+    @property
+    def output_names(self) -> list[str]:
+        """Names of the power-conjugate port outputs."""
+        return [i.output for i in self.inputs]
+
+    @property
+    def measured_names(self) -> list[str]:
+        return [mo.name for mo in self.measured]
+
+    @property
+    def param_names(self) -> list[str]:
+        return [q.name for q in self.params]
+
+    def param_values(self) -> dict[str, float]:
+        """Current parameter values by name."""
+        return {q.name: q.value for q in self.params}
+
+    def param(self, name: str) -> Param:
+        """The parameter called ``name`` (raises ParameterError naming it if unknown)."""
+        for q in self.params:
+            if q.name == name:
+                return q
+        raise ParameterError(f"system {self.name!r} has no parameter {name!r}; known: {', '.join(self.param_names)}")
+
+    def param_vector(self, overrides: dict | None = None) -> np.ndarray:
+        """Parameter values in order, with ``overrides`` by name applied (checked)."""
+        vals = self.param_values()
+        for k, v in (overrides or {}).items():
+            if k not in vals:
+                raise ParameterError(f"system {self.name!r} has no parameter {k!r}; known: {', '.join(self.param_names)}")
+            if not isinstance(v, Real) or not np.isfinite(v):
+                raise ParameterError(f"parameter {k!r}: value {v!r} is not a finite number")
+            vals[k] = float(v)
+        return np.array([vals[q] for q in self.param_names], dtype=float)
+
+    def with_params(self, values: dict | None = None, **kw) -> PHSystem:
+        """New system with some parameter values changed.
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> rc_circuit().with_params({"C.C": 2e-6}).param("C.C").value
+        2e-06
+        """
+        values = {**(values or {}), **kw}
+        known = set(self.param_names)
+        bad = [k for k in values if k not in known]
+        if bad:
+            raise ParameterError(f"system {self.name!r} has no parameter {', '.join(map(repr, bad))}; known: {', '.join(self.param_names)}")
+        params = [q.with_value(values[q.name]) if q.name in values else q for q in self.params]
+        return self._replace(params=params)
+
+    def _replace(self, **changes) -> PHSystem:
+        kw = dict(
+            states=self.states, H=list(self.energy_terms), J=self.J, R=self.R, G=self.G, P=self.P, S=self.S, N=self.N,
+            inputs=self.inputs, params=self.params, measured=self.measured,
+            conditions=[c for c in self.conditions if not c.label.endswith(f"in {self.name}")],
+            dissipators=self.dissipators, definitions=self.definitions, description=self.description,
+            structure=self.structure,
+        )
+        kw.update(changes)
+        name = kw.pop("name", self.name)
+        return PHSystem(name, **kw)
+
+    def renamed(self, name: str) -> PHSystem:
+        """Same system under another name."""
+        return self._replace(name=name)
+
+    # -- derived quantities (cached) -------------------------------------------------
+    @cached_property
+    def grad_H(self) -> sp.Matrix:
+        """Gradient dH/dx as a column matrix."""
+        return sp.Matrix([sp.diff(self.H, xi) for xi in self.x])
+
+    @cached_property
+    def dynamics(self) -> sp.Matrix:
+        """Right-hand side x' as a column matrix."""
+        u = sp.Matrix(self.u) if self.inputs else sp.zeros(0, 1)
+        return (self.J - self.R) * self.grad_H + (self.G - self.P) * u
+
+    @cached_property
+    def port_output(self) -> sp.Matrix:
+        """Power-conjugate outputs y."""
+        u = sp.Matrix(self.u) if self.inputs else sp.zeros(0, 1)
+        return (self.G + self.P).T * self.grad_H + (self.S + self.N) * u
+
+    @cached_property
+    def dissipation_matrix(self) -> sp.Matrix:
+        """[[R, P], [P^T, S]], the quadratic form of dissipated power in z = [dH/dx; u]."""
+        return sp.BlockMatrix([[self.R, self.P], [self.P.T, self.S]]).as_explicit()
+
+    @cached_property
+    def power_balance(self) -> dict[str, sp.Expr]:
+        """Symbolic power terms: ``dHdt``, ``dissipated``, ``supplied`` (y^T u).
+
+        ``dHdt == supplied - dissipated`` holds identically.
+        """
+        z = sp.Matrix(list(self.grad_H) + list(self.u))
+        dissipated = (z.T * self.dissipation_matrix * z)[0, 0]
+        supplied = (self.port_output.T * sp.Matrix(self.u))[0, 0] if self.inputs else sp.Integer(0)
+        dHdt = (self.grad_H.T * self.dynamics)[0, 0]
+        return {"dHdt": dHdt, "dissipated": dissipated, "supplied": supplied}
+
+    def dissipator_powers(self) -> dict[str, sp.Expr]:
+        """Power dissipated by each resistive element, as expressions of state and input."""
+        z = list(self.grad_H) + list(self.u)
+        out = {}
+        for label, entries in self.dissipators:
+            tot = sp.Integer(0)
+            for (i, j), v in entries.items():
+                tot += (1 if i == j else 2) * v * z[i] * z[j]
+            out[label] = tot
+        return out
+
+    # -- numeric evaluation ----------------------------------------------------------
+    def lambdify(self, expr, with_u: bool = True):
+        """Numpy function ``f(x, u, p)`` of a sympy expression or matrix of this system.
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> s = rc_circuit()
+        >>> float(s.lambdify(s.H)([1e-6], [0.0], s.param_vector()))
+        0.5
+        """
+        args = self.x + (self.u if with_u else []) + self.p
+        f = sp.lambdify(args, expr, modules=_NUMERIC_MODULES, cse=True)
+        nx, nu = len(self.x), len(self.u)
+
+        def call(x, u=(), p=None):
+            p = self.param_vector() if p is None else p
+            x = np.asarray(x, dtype=float)
+            return f(*x, *(np.asarray(u, dtype=float).reshape(-1)[:nu] if with_u else []), *p)
+
+        call.nx = nx
+        return call
+
+    def sample_box(self, k: int, seed: int = 0, params: bool = False) -> np.ndarray:
+        """``k`` points drawn uniformly from the states' (and optionally parameters') ranges."""
+        rng = np.random.default_rng(seed)
+        lo = [s.range[0] for s in self.states] + ([q.range[0] for q in self.params] if params else [])
+        hi = [s.range[1] for s in self.states] + ([q.range[1] for q in self.params] if params else [])
+        return rng.uniform(lo, hi, size=(k, len(lo)))
+
+    # -- checks -----------------------------------------------------------------------
+    def _check_symbols(self, problems: list[str]) -> None:
+        known = set(self.x) | set(self.p)
+        known_u = known | set(self.u)
+        by_name = {s.name: s for s in known_u}
+
+        def look(expr, where, allowed):
+            for s in expr.free_symbols:
+                if s not in allowed:
+                    hint = ""
+                    if s.name in by_name:
+                        hint = " (a symbol of that name exists with other assumptions: build it with Param.symbol / symbol_of_state)"
+                    problems.append(f"unknown symbol {s.name!r} in {where}{hint}")
+
+        for t in self.energy_terms:
+            look(t.expr, f"energy term {t.label!r}", known)
+        for nm, M in (("J", self.J), ("R", self.R), ("G", self.G), ("P", self.P), ("S", self.S), ("N", self.N)):
+            look(M, nm, known)
+        for mo in self.measured:
+            look(sp.sympify(mo.expr), f"measured output {mo.name!r}", known_u)
+        for c in self.conditions:
+            look(c.expr, f"condition {c.label!r}", known_u)
+
+    def _check_structure(self, problems: list[str]) -> None:
+        n = len(self.states)
+        for i in range(n):
+            for j in range(i, n):
+                a, b = self.J[i, j], self.J[j, i]
+                if a == 0 and b == 0:
+                    continue
+                if sp.expand(a + b) != 0 and sp.simplify(a + b) != 0:
+                    problems.append(f"J is not skew-symmetric: J[{i},{j}] + J[{j},{i}] = {sp.simplify(a + b)} "
+                                    f"({self.states[i].name}, {self.states[j].name})")
+        D = self.dissipation_matrix
+        for i in range(D.rows):
+            for j in range(i + 1, D.rows):
+                if D[i, j] != D[j, i] and sp.simplify(D[i, j] - D[j, i]) != 0:
+                    problems.append(f"R (with P, S) is not symmetric at entry ({i},{j})")
+        if problems:
+            return
+        # numeric PSD test at sampled points of the declared ranges: refuse what is certainly wrong
+        from phs.checks import _psd_samples  # local import: checks uses PHSystem
+
+        worst = _psd_samples(self, k=8, seed=0)
+        if worst is not None and worst["min_eig"] < -1e-9 * max(1.0, worst["scale"]):
+            problems.append(
+                f"R is not positive semidefinite: eigenvalue {worst['min_eig']:.3g} of [[R, P], [P^T, S]] at "
+                + ", ".join(f"{k}={v:.4g}" for k, v in worst["point"].items())
+            )
+
+    def check(self, samples: int = 200, seed: int = 0):
+        """Structural report: skew J, PSD R (symbolic or sampled), H bounded below, units.
+
+        Returns
+        -------
+        phs.checks.CheckReport
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> rc_circuit().check().ok
+        True
+        """
+        from phs.checks import check_system
+
+        return check_system(self, samples=samples, seed=seed)
+
+    # -- identity, display --------------------------------------------------------------
+    def model_hash(self) -> str:
+        """Hash of the model's structure and parameter names (not values): keys caches."""
+        h = hashlib.sha256()
+        for part in (
+            self.name, [s.name for s in self.states], [i.name for i in self.inputs], self.param_names,
+            [sp.srepr(t.expr) for t in self.energy_terms], sp.srepr(self.J), sp.srepr(self.R), sp.srepr(self.G),
+            sp.srepr(self.P), sp.srepr(self.S), sp.srepr(self.N), [(m.name, sp.srepr(m.expr)) for m in self.measured],
+            [(c.label, sp.srepr(c.expr)) for c in self.conditions],
+        ):
+            h.update(repr(part).encode())
+        return h.hexdigest()[:16]
+
+    def __repr__(self) -> str:
+        return (f"PHSystem({self.name!r}, states={len(self.states)}, inputs={len(self.inputs)}, "
+                f"params={len(self.params)}, measured={len(self.measured)})")
+
+    def __str__(self) -> str:
+        from phs.display import summary
+
+        return summary(self)
+
+    def _repr_latex_(self) -> str:
+        from phs.display import latex
+
+        return latex(self)
+
+    def save(self, path) -> None:
+        """Save definition and parameter values to a JSON file (atomically)."""
+        from phs.io import save_system
+
+        save_system(self, path)
+
+    @staticmethod
+    def load(path) -> PHSystem:
+        """Load a system saved with :meth:`save`."""
+        from phs.io import load_system
+
+        return load_system(path)

@@ -1,0 +1,230 @@
+"""Dimensional analysis of model expressions.
+
+Units are written as products of powers of unit names, e.g. ``"N*m/rad"``,
+``"kg*m**2"``, ``"V"``, ``"1"``.  Only dimensions are checked (prefixes and
+scales do not matter here): every term of a Hamiltonian must come out in
+joules, arguments of transcendental functions must be dimensionless, and the
+terms of a sum must agree.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import sympy as sp
+
+from phs.errors import UnitError
+
+# exponents of (m, kg, s, A, K, mol, cd)
+_BASE = {
+    "m": (1, 0, 0, 0, 0, 0, 0),
+    "kg": (0, 1, 0, 0, 0, 0, 0),
+    "s": (0, 0, 1, 0, 0, 0, 0),
+    "A": (0, 0, 0, 1, 0, 0, 0),
+    "K": (0, 0, 0, 0, 1, 0, 0),
+    "mol": (0, 0, 0, 0, 0, 1, 0),
+    "cd": (0, 0, 0, 0, 0, 0, 1),
+}
+_DERIVED = {
+    "1": "1",
+    "rad": "1",
+    "sr": "1",
+    "N": "kg*m/s**2",
+    "J": "kg*m**2/s**2",
+    "W": "kg*m**2/s**3",
+    "Pa": "kg/(m*s**2)",
+    "Hz": "1/s",
+    "C": "A*s",
+    "V": "kg*m**2/(A*s**3)",
+    "F": "A**2*s**4/(kg*m**2)",
+    "Ohm": "kg*m**2/(A**2*s**3)",
+    "S": "A**2*s**3/(kg*m**2)",
+    "H": "kg*m**2/(A**2*s**2)",
+    "Wb": "kg*m**2/(A*s**2)",
+    "T": "kg/(A*s**2)",
+    "g": "kg",
+    "mm": "m",
+    "cm": "m",
+    "um": "m",
+    "ms": "s",
+    "kV": "V",
+    "mA": "A",
+    "uA": "A",
+    "kN": "N",
+    "mN": "N",
+    "L": "m**3",
+    "bar": "Pa",
+    "deg": "1",
+}
+
+Dim = tuple[Fraction, ...]
+DIMENSIONLESS: Dim = tuple(Fraction(0) for _ in range(7))
+_UNIT_CACHE: dict[str, Dim] = {}
+
+
+def _mul(a: Dim, b: Dim) -> Dim:
+    return tuple(x + y for x, y in zip(a, b))
+
+
+def _pow(a: Dim, k: Fraction) -> Dim:
+    return tuple(x * k for x in a)
+
+
+def parse_unit(unit: str) -> Dim:
+    """Dimension of a unit string as exponents of (m, kg, s, A, K, mol, cd).
+
+    Raises
+    ------
+    UnitError
+        If the string uses an unknown unit name or is not a product of powers.
+
+    Examples
+    --------
+    >>> parse_unit("N*m/rad") == parse_unit("J")
+    True
+    >>> format_dim(parse_unit("V*A"))
+    'kg*m**2/s**3'
+    """
+    key = unit.strip() or "1"
+    if key in _UNIT_CACHE:
+        return _UNIT_CACHE[key]
+    names = {n: sp.Symbol(n) for n in list(_BASE) + list(_DERIVED)}
+    try:
+        expr = sp.sympify(key.replace("^", "**").replace("Ω", "Ohm"), locals=names)
+    except (sp.SympifyError, SyntaxError, TypeError) as exc:
+        raise UnitError(f"cannot read unit {unit!r}: {exc}") from None
+    dim = _dim_of_unit_expr(expr, unit)
+    _UNIT_CACHE[key] = dim
+    return dim
+
+
+def _dim_of_unit_expr(expr: sp.Expr, unit: str) -> Dim:
+    if expr.is_Number:
+        return DIMENSIONLESS
+    if expr.is_Symbol:
+        n = expr.name
+        if n in _BASE:
+            return tuple(Fraction(v) for v in _BASE[n])
+        if n in _DERIVED:
+            return parse_unit(_DERIVED[n]) if _DERIVED[n] != "1" else DIMENSIONLESS
+        raise UnitError(f"unknown unit {n!r} in {unit!r}")
+    if expr.is_Mul:
+        d = DIMENSIONLESS
+        for a in expr.args:
+            d = _mul(d, _dim_of_unit_expr(a, unit))
+        return d
+    if expr.is_Pow and expr.exp.is_Rational:
+        return _pow(_dim_of_unit_expr(expr.base, unit), Fraction(str(expr.exp)))
+    raise UnitError(f"cannot read unit {unit!r}: only products of powers of unit names are allowed")
+
+
+def format_dim(dim: Dim) -> str:
+    """Readable SI form of a dimension (``kg*m**2/s**2``).
+
+    Examples
+    --------
+    >>> format_dim(parse_unit("J"))
+    'kg*m**2/s**2'
+    """
+    names = ["m", "kg", "s", "A", "K", "mol", "cd"]
+    order = [1, 0, 2, 3, 4, 5, 6]
+    num, den = [], []
+    for i in order:
+        e = dim[i]
+        if e == 0:
+            continue
+        a = abs(e)
+        txt = names[i] if a == 1 else f"{names[i]}**{a}"
+        (num if e > 0 else den).append(txt)
+    s = "*".join(num) if num else "1"
+    if den:
+        s += "/" + (den[0] if len(den) == 1 else "(" + "*".join(den) + ")")
+    return s
+
+
+_TRANSCENDENTAL = (
+    sp.sin, sp.cos, sp.tan, sp.asin, sp.acos, sp.atan, sp.exp, sp.log,
+    sp.sinh, sp.cosh, sp.tanh, sp.erf, sp.erfc, sp.asinh, sp.atanh, sp.acosh,
+)
+
+
+class _Mismatch(Exception):
+    pass
+
+
+def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim]) -> Dim:
+    """Dimension of ``expr`` given the dimension of each symbol.
+
+    Raises ``UnitError`` naming the offending sub-expression when a sum mixes
+    dimensions or a transcendental function receives a dimensioned argument.
+
+    Examples
+    --------
+    >>> k, x = sp.symbols("k x")
+    >>> format_dim(dimension(k * x**2 / 2, {k: parse_unit("N/m"), x: parse_unit("m")}))
+    'kg*m**2/s**2'
+    """
+    cache: dict[sp.Expr, Dim] = {}
+
+    def rec(e: sp.Expr) -> Dim:
+        if e in cache:
+            return cache[e]
+        if e.is_Number or e.is_NumberSymbol:
+            d = DIMENSIONLESS
+        elif e.is_Symbol:
+            if e not in units:
+                raise UnitError(f"no unit known for symbol {e}")
+            d = units[e]
+        elif e.is_Add:
+            dims = [rec(a) for a in e.args]
+            d = dims[0]
+            for a, da in zip(e.args[1:], dims[1:]):
+                if da != d:
+                    raise UnitError(
+                        f"sum mixes dimensions: {e.args[0]} is {format_dim(d)} but {a} is {format_dim(da)}"
+                    )
+        elif e.is_Mul:
+            d = DIMENSIONLESS
+            for a in e.args:
+                d = _mul(d, rec(a))
+        elif e.is_Pow:
+            db = rec(e.base)
+            if e.exp.is_Rational:
+                d = _pow(db, Fraction(str(e.exp)))
+            else:
+                if rec(e.exp) != DIMENSIONLESS or db != DIMENSIONLESS:
+                    raise UnitError(f"non-integer power of a dimensioned quantity: {e}")
+                d = DIMENSIONLESS
+        elif isinstance(e, _TRANSCENDENTAL):
+            for a in e.args:
+                if rec(a) != DIMENSIONLESS:
+                    raise UnitError(f"argument of {e.func.__name__} is not dimensionless in {e}")
+            d = DIMENSIONLESS
+        elif isinstance(e, (sp.Abs, sp.re, sp.im)):
+            d = rec(e.args[0])
+        elif isinstance(e, (sp.sign, sp.Heaviside)):
+            rec(e.args[0])
+            d = DIMENSIONLESS
+        elif isinstance(e, (sp.Max, sp.Min)):
+            dims = [rec(a) for a in e.args]
+            if any(x != dims[0] for x in dims):
+                raise UnitError(f"{e.func.__name__} mixes dimensions in {e}")
+            d = dims[0]
+        elif isinstance(e, sp.atan2):
+            if rec(e.args[0]) != rec(e.args[1]):
+                raise UnitError(f"atan2 arguments differ in dimension in {e}")
+            d = DIMENSIONLESS
+        elif isinstance(e, sp.Piecewise):
+            dims = [rec(c[0]) for c in e.args]
+            if any(x != dims[0] for x in dims):
+                raise UnitError(f"branches of a piecewise expression differ in dimension in {e}")
+            d = dims[0]
+        else:
+            raise UnitError(f"cannot determine the dimension of {e}")
+        cache[e] = d
+        return d
+
+    return rec(sp.sympify(expr))
+
+
+JOULE = parse_unit("J")

@@ -1,0 +1,88 @@
+"""Small reference models with analytic solutions (used in docs, tests and benchmarks).
+
+Each is built from :mod:`components` through :func:`phs.interconnect`.
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from components import Capacitor, Damper, ForceSource, Inductor, Mass, NonlinearSpring, LinearSpring, Resistor, VoltageSource
+from phs import Measured, interconnect, series, symbol_of_state
+
+
+def rc_circuit(R: float = 1e3, C: float = 1e-6):
+    """Voltage source, resistor and capacitor in series (time constant R C).
+
+    States: ``C.Q``; input ``U`` [V]; port output ``U.i`` [A] (the source
+    current, with feedthrough 1/R); measured output ``v_C`` [V].
+
+    Examples
+    --------
+    >>> s = rc_circuit()
+    >>> s.state_names, s.input_names, s.output_names
+    (['C.Q'], ['U'], ['U.i'])
+    """
+    q = symbol_of_state("C.Q")
+    return interconnect(
+        "rc",
+        [VoltageSource("U"), Resistor("R", R=R), Capacitor("C", C=C)],
+        [series("U", "R", "C")],
+        measured=[Measured("v_C", q / sp.Symbol("C.C", positive=True), "V", "capacitor voltage")],
+        description="RC low-pass: U -> R -> C",
+    )
+
+
+def rlc_circuit(R: float = 10.0, L: float = 1e-3, C: float = 1e-6):
+    """Series RLC circuit driven by a voltage source.
+
+    Examples
+    --------
+    >>> rlc_circuit().state_names
+    ['L.phi', 'C.Q']
+    """
+    return interconnect(
+        "rlc",
+        [VoltageSource("U"), Resistor("R", R=R), Inductor("L", L=L), Capacitor("C", C=C)],
+        [series("U", "R", "L", "C")],
+        description="series RLC: U -> R -> L -> C",
+    )
+
+
+def mass_spring_damper(m: float = 1.0, k: float = 4.0, b: float = 0.4):
+    """Mass on a linear spring and damper, driven by a force ``F``.
+
+    States ``k.l`` (elongation) and ``m.p`` (momentum); output ``F.v``.
+
+    Examples
+    --------
+    >>> mass_spring_damper().state_names
+    ['m.p', 'k.l']
+    """
+    return interconnect(
+        "msd",
+        [ForceSource("F"), Mass("m", m=m), LinearSpring("k", K=k), Damper("b", b=b)],
+        [series("F", "m", "k", "b")],
+        measured=[Measured("position", symbol_of_state("k.l"), "m", "spring elongation")],
+        description="mass-spring-damper under a force",
+    )
+
+
+def duffing_oscillator(m: float = 1.0, k: float = 1.0, k3: float = 0.5, b: float = 0.0):
+    """Mass on a hardening spring ``F = k q + k3 q**3`` (undamped by default).
+
+    Examples
+    --------
+    >>> duffing_oscillator().H.has(sp.Symbol("k3"))
+    False
+    """
+    q = sp.Symbol("q", real=True)
+    from phs import Param
+
+    kp, k3p = Param("k", k, "N/m", "linear stiffness"), Param("k3", k3, "N/m**3", "cubic stiffness")
+    comps = [Mass("m", m=m), NonlinearSpring("s", force=kp.symbol * q + k3p.symbol * q**3, variable=q, params=[kp, k3p])]
+    members = ["m", "s"]
+    if b > 0:
+        comps.append(Damper("b", b=b))
+        members.append("b")
+    return interconnect("duffing", comps, [series(*members)], description="Duffing oscillator")
