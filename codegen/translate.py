@@ -68,7 +68,7 @@ class Translator:
             b = self._rec(e.base)
             ex = e.exp
             if ex == 2:
-                r = ca.sq(b)
+                r = b * b
             elif ex == sp.Rational(1, 2):
                 r = ca.sqrt(b)
             elif ex == -1:

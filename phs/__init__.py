@@ -17,11 +17,12 @@ from phs.errors import (
     SimulationError,
     UnitError,
 )
-from phs.junctions import bond, parallel, series
+from phs.junctions import bond, feedback_link, parallel, series
 from phs.params import Condition, InputInfo, Measured, Param, StateInfo
 from phs.system import PHSystem
 from phs.interconnect import interconnect
-from phs.equilibrium import equilibrium
+from phs.subsystem import feedback
+from phs.equilibria import EquilibriumResult, equilibrium
 from phs import signals
 
 __version__ = "0.1.0"
@@ -29,8 +30,8 @@ __version__ = "0.1.0"
 __all__ = [
     "Component", "symbol_of_input", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
     "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
-    "bond", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
-    "interconnect", "equilibrium", "signals", "simulate", "load",
+    "bond", "feedback_link", "feedback", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
+    "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "load",
 ]
 
 

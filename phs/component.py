@@ -50,6 +50,7 @@ class Port:
     domain: str = "any"
     supplies: bool = False
     component: str = ""
+    causality: str | None = None  # "effort"/"flow": which variable is the input of a subsystem port
 
 
 def make_port(component: str, local: str, domain: str = "any", supplies: bool = False) -> Port:
@@ -111,10 +112,12 @@ class Source:
 
 @dataclass(frozen=True)
 class Dissipator:
-    """A resistive element: the power it dissipates is the sum of e*f over its ports."""
+    """A resistive element: the power it dissipates is the sum of e*f over its ports,
+    or ``power`` (an expression in port variables) when given."""
 
     label: str
     ports: tuple[Port, ...]
+    power: sp.Expr | None = None
 
 
 @dataclass(frozen=True)

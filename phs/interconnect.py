@@ -207,6 +207,14 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
     for j in connections:
         ensure(j)
     for j, members, jdesc in junction_members.values():
+        if j.kind == "L":
+            (e1, f1, _), (e2, f2, _) = members[:2]
+            p1, p2 = (ports[m.lstrip("-")] if m.lstrip("-") in ports else by_comp[m][0] for m in j.members)
+            imp1, con1 = (e1, f1) if (p1.causality or "effort") == "effort" else (f1, e1)
+            imp2, con2 = (e2, f2) if (p2.causality or "effort") == "effort" else (f2, e2)
+            equations.extend([imp1 + con2, imp2 - con1])
+            eq_where.extend([jdesc, jdesc])
+            continue
         common = 1 if j.kind == "1" else 0  # 1-junction: common flow; 0-junction: common effort
         other = 1 - common
         first = members[0][common] if members else None
@@ -281,7 +289,10 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
     diss = []
     for pc in pieces:
         for d in pc.dissipators:
-            power = sum((val(p.effort) * val(p.flow) for p in d.ports), sp.Integer(0))
+            if d.power is not None:
+                power = d.power.xreplace({v: val(v) for v in d.power.free_symbols if v in knowns or v in sol})
+            else:
+                power = sum((val(p.effort) * val(p.flow) for p in d.ports), sp.Integer(0))
             entries = {}
             zs = sorted(power.free_symbols & set(zsyms), key=lambda z: zindex[z])
             for a in range(len(zs)):

@@ -24,7 +24,7 @@ class Junction:
 
     def describe(self) -> str:
         inner = ", ".join(m.describe() if isinstance(m, Junction) else str(m) for m in self.members)
-        word = "series" if self.kind == "1" else "parallel"
+        word = {"1": "series", "0": "parallel", "L": "feedback_link"}[self.kind]
         return f"{word}({inner})"
 
 
@@ -82,3 +82,18 @@ def bond(a: str, b: str) -> Junction:
     'parallel(tf.b, spring)'
     """
     return _make("0", (a, b), None)
+
+
+def feedback_link(a: str, b: str) -> Junction:
+    """Negative feedback between two subsystem ports: ``u_a = -y_b`` and ``u_b = y_a``.
+
+    Power-conserving: ``y_a u_a + y_b u_b = 0``.  Used by :func:`phs.feedback`.
+
+    Examples
+    --------
+    >>> feedback_link("plant.F", "ctrl.v").describe()
+    'feedback_link(plant.F, ctrl.v)'
+    """
+    if not (isinstance(a, str) and isinstance(b, str)):
+        raise InterconnectionError("feedback_link joins two port names")
+    return Junction("L", (a, b), None)

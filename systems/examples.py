@@ -26,7 +26,7 @@ def rc_circuit(R: float = 1e3, C: float = 1e-6):
     q = symbol_of_state("C.Q")
     return interconnect(
         "rc",
-        [VoltageSource("U"), Resistor("R", R=R), Capacitor("C", C=C)],
+        [VoltageSource("U"), Resistor("R", R=R), Capacitor("C", C=C, range=(-10 * C, 10 * C))],
         [series("U", "R", "C")],
         measured=[Measured("v_C", q / sp.Symbol("C.C", positive=True), "V", "capacitor voltage")],
         description="RC low-pass: U -> R -> C",
@@ -43,7 +43,8 @@ def rlc_circuit(R: float = 10.0, L: float = 1e-3, C: float = 1e-6):
     """
     return interconnect(
         "rlc",
-        [VoltageSource("U"), Resistor("R", R=R), Inductor("L", L=L), Capacitor("C", C=C)],
+        [VoltageSource("U"), Resistor("R", R=R), Inductor("L", L=L, range=(-0.1 * L, 0.1 * L)),
+         Capacitor("C", C=C, range=(-10 * C, 10 * C))],
         [series("U", "R", "L", "C")],
         description="series RLC: U -> R -> L -> C",
     )

@@ -1,0 +1,108 @@
+"""PHSystems as components: hierarchical models and feedback interconnection."""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from phs.component import Component, Dissipator, Piece, Port, Relation, Source, Storage
+from phs.errors import InterconnectionError
+from phs.junctions import feedback_link, series
+from phs.params import InputInfo
+
+
+def subsystem_piece(system) -> Piece:
+    """The piece of a PHSystem used as a component.
+
+    Its states keep their names; each input becomes an absorbing port
+    ``{system}.{input}`` whose input variable is the effort (voltage, force)
+    or the flow (current, velocity) according to the input's kind.
+    """
+    n = system.name
+    storages = []
+    for st in system.states:
+        full = f"{n}.{st.name}"
+        storages.append(Storage(st, Port(full, sp.Symbol(f"e[{full}]", real=True), sp.Symbol(f"f[{full}]", real=True),
+                                         "any", False, n)))
+    ports = []
+    for inp in system.inputs:
+        full = f"{n}.{inp.name}"
+        ports.append(Port(full, sp.Symbol(f"e[{full}]", real=True), sp.Symbol(f"f[{full}]", real=True), "any", False, n,
+                          inp.kind))
+    c = sp.Matrix(len(storages), 1, [s.coenergy for s in storages])
+    uimp = sp.Matrix(len(ports), 1, [p.effort if p.causality == "effort" else p.flow for p in ports])
+    ucon = [p.flow if p.causality == "effort" else p.effort for p in ports]
+    rates = (system.J - system.R) * c + ((system.G - system.P) * uimp if ports else sp.zeros(len(storages), 1))
+    outs = (system.G + system.P).T * c + (system.S + system.N) * uimp if ports else sp.zeros(0, 1)
+    rels = [Relation(s.rate - rates[i], n, "subsystem") for i, s in enumerate(storages)]
+    rels += [Relation(ucon[j] - outs[j], n, "subsystem") for j in range(len(ports))]
+    z = list(c) + list(uimp)
+    diss = []
+    for label, entries in system.dissipators:
+        power = sum(((1 if i == j else 2) * v * z[i] * z[j] for (i, j), v in entries.items()), sp.Integer(0))
+        diss.append(Dissipator(f"{n}.{label}", (), power))
+    return Piece(
+        n, storages=tuple(storages), energy=tuple(system.energy_terms), ports=tuple(ports), relations=tuple(rels),
+        dissipators=tuple(diss), params=tuple(system.params), measured=tuple(system.measured),
+        conditions=tuple(system.conditions),
+    )
+
+
+class _ExternalInput(Component):
+    """An input of a subsystem kept as an input of the enclosing system."""
+
+    def __init__(self, name: str, info: InputInfo):
+        super().__init__(name)
+        self.info = info
+
+    def piece(self) -> Piece:
+        port = self._port("p", "any", supplies=True)
+        info = InputInfo(self.name, self.info.unit, f"{self.name}.y" if "." not in self.info.output else
+                         self.name + "." + self.info.output.split(".")[-1], self.info.output_unit, self.info.kind,
+                         self.info.description, self.info.range)
+        return Piece(self.name, ports=(port,), sources=(Source(info, port),))
+
+
+def feedback(sys1, sys2, pairs, name: str | None = None):
+    """Negative feedback interconnection of two PH systems: ``u1 = -y2 + v1``, ``u2 = y1 + v2``.
+
+    Parameters
+    ----------
+    sys1, sys2 : PHSystem
+    pairs : sequence of (str, str)
+        (input of sys1, input of sys2) joined in feedback.
+    name : str, optional
+        Name of the closed loop (default ``{sys1}_{sys2}``).
+
+    Inputs not listed stay inputs of the result, renamed ``{system}_{input}``.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper, rc_circuit
+    >>> from components import Damper
+    >>> from phs import interconnect, series
+    >>> ctrl = interconnect("ctrl", [Damper("d", b=2.0), _ExternalInput("v", InputInfo("v", "m/s", "v.F", "N", "flow"))],
+    ...                     [series("v", "d")])
+    >>> loop = feedback(mass_spring_damper(), ctrl, [("F", "v")])
+    >>> loop.R[0, 0]
+    b.b + d.b
+    """
+    from phs.interconnect import interconnect
+
+    if sys1.name == sys2.name:
+        raise InterconnectionError(f"feedback: both systems are named {sys1.name!r}; rename one with .renamed()")
+    used1 = {a for a, _ in pairs}
+    used2 = {b for _, b in pairs}
+    for s, used in ((sys1, used1), (sys2, used2)):
+        bad = used - set(s.input_names)
+        if bad:
+            raise InterconnectionError(f"feedback: system {s.name!r} has no input {', '.join(sorted(bad))}; "
+                                       f"inputs: {s.input_names}")
+    conns = [feedback_link(f"{sys1.name}.{a}", f"{sys2.name}.{b}") for a, b in pairs]
+    comps = [sys1, sys2]
+    for s, used in ((sys1, used1), (sys2, used2)):
+        for inp in s.inputs:
+            if inp.name not in used:
+                ext = _ExternalInput(f"{s.name}_{inp.name}", inp)
+                comps.append(ext)
+                conns.append(series(ext.name, f"{s.name}.{inp.name}"))
+    return interconnect(name or f"{sys1.name}_{sys2.name}", comps, conns)
