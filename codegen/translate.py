@@ -28,8 +28,8 @@ class Translator:
     >>> x = sp.Symbol("x")
     >>> X = ca.SX.sym("x")
     >>> tr = Translator({x: X})
-    >>> str(tr(sp.sin(x) ** 2 + sp.sin(x)))
-    '(sq(sin(x))+sin(x))'
+    >>> str(tr(sp.sin(x) ** 2 + sp.sin(x)))   # sin(x) is computed once
+    '@1=sin(x), (sq(@1)+@1)'
     """
 
     def __init__(self, symbols: dict):

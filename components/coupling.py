@@ -31,10 +31,8 @@ class Transformer(Component):
     >>> from components import Mass, LinearSpring
     >>> s = interconnect("lever", [Mass("m"), Transformer("tf", 2.0), LinearSpring("k")],
     ...                  [series("m", "tf.a"), series("tf.b", "k")])
-    >>> s.J
-    Matrix([
-    [    0, -tf.n],
-    [tf.n,     0]])
+    >>> s.J.tolist()
+    [[0, -tf.n], [tf.n, 0]]
     """
 
     def __init__(self, name: str, ratio, unit: str = "1", domains=("any", "any")):
@@ -59,10 +57,8 @@ class Gyrator(Component):
     >>> from components import Inductor, Mass
     >>> s = interconnect("motor", [Inductor("L"), Gyrator("k", 0.1), Mass("m")],
     ...                  [series("L", "k.a"), series("k.b", "m")])
-    >>> s.J
-    Matrix([
-    [   0, -k.n],
-    [k.n,    0]])
+    >>> s.J.tolist()
+    [[0, -k.n], [k.n, 0]]
     """
 
     def __init__(self, name: str, ratio, unit: str = "1", domains=("any", "any")):

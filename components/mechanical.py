@@ -22,10 +22,8 @@ class Mass(QuadraticStorage):
     --------
     >>> from phs import interconnect, series
     >>> s = interconnect("m", [Mass("m", m=2.0), LinearSpring("k", K=8.0)], [series("m", "k")])
-    >>> s.J
-    Matrix([
-    [ 0, -1],
-    [ 1,  0]])
+    >>> s.state_names, s.J.tolist()
+    (['m.p', 'k.l'], [[0, -1], [1, 0]])
     """
 
     kind = "I"

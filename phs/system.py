@@ -335,8 +335,8 @@ class PHSystem:
         --------
         >>> from systems.examples import rc_circuit
         >>> s = rc_circuit()
-        >>> float(s.lambdify(s.H)([1e-6], [0.0], s.param_vector()))
-        0.5
+        >>> float(s.lambdify(s.H)([1e-6], [0.0], s.param_vector()))   # Q**2 / (2 C)
+        5e-07
         """
         args = self.x + (self.u if with_u else []) + self.p
         f = sp.lambdify(args, expr, modules=_NUMERIC_MODULES, cse=True)
