@@ -6,7 +6,10 @@ breakpoints, per-state scaling, energy accounts) and
 :func:`discrete_gradient_simulate` (structure-preserving integrator).
 """
 
+from codegen.discrete_gradient import discrete_gradient_simulate
 from codegen.functions import GeneratedFunctions, generate
-from codegen.simulator import SimulationResult, Simulator, simulate, simulator
+from codegen.results import SimulationResult
+from codegen.simulator import Simulator, simulate, simulator
 
-__all__ = ["generate", "GeneratedFunctions", "simulator", "simulate", "Simulator", "SimulationResult"]
+__all__ = ["generate", "GeneratedFunctions", "simulator", "simulate", "Simulator", "SimulationResult",
+           "discrete_gradient_simulate"]

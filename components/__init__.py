@@ -28,10 +28,12 @@ from components.mechanical import (
 )
 from components.coupling import Gyrator, Transformer
 from components.constraints import GeometricConstraint, Geometry, geometric_symbol
+from components.kinematics import ConfigurationInertia, KinematicChain
 
 __all__ = [
     "Capacitor", "CurrentSource", "DriftBranch", "Inductor", "Resistor", "VariableCapacitor", "VoltageSource",
     "Damper", "ForceSource", "Gravity", "LinearSpring", "Mass", "NonlinearSpring", "RotationalDamper",
     "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
     "GeometricConstraint", "Geometry", "geometric_symbol",
+    "ConfigurationInertia", "KinematicChain",
 ]

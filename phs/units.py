@@ -219,6 +219,8 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim]) -> Dim:
             if any(x != dims[0] for x in dims):
                 raise UnitError(f"branches of a piecewise expression differ in dimension in {e}")
             d = dims[0]
+        elif hasattr(e, "_dimension"):  # custom functions declare how they combine their arguments' dimensions
+            d = e._dimension([rec(a) for a in e.args])
         else:
             raise UnitError(f"cannot determine the dimension of {e}")
         cache[e] = d

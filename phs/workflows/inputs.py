@@ -1,0 +1,282 @@
+"""Input signals from the command line: CSV recordings, expressions and ``NAME=VALUE`` options.
+
+Rows of a CSV file are numbered as in a spreadsheet: the header is row 1,
+the first data row is row 2.  Every error names the file, the column and the
+row.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from phs.errors import InputDataError
+from phs.signals import Sampled, Signal, parse_expression
+
+_ASSIGN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)\s*=(?!=)(.*)$", re.S)
+
+
+def parse_assignments(items: Iterable[str] | None, option: str = "--param", numeric: bool = False) -> dict:
+    """Parse ``NAME=VALUE`` strings (from ``--param``, ``--map``, ``--x0``) into a dict.
+
+    Parameters
+    ----------
+    items : iterable of str
+        The option's values, each ``NAME=VALUE``.
+    option : str
+        The option's name, used in error messages.
+    numeric : bool
+        Convert values to finite floats.
+
+    Raises
+    ------
+    InputDataError
+        Naming the option and the item: no ``=``, empty name or value, a name
+        given twice, or a value that is not a finite number.
+
+    Examples
+    --------
+    >>> parse_assignments(["R.R=2e3", "C.C = 1e-6"], numeric=True)
+    {'R.R': 2000.0, 'C.C': 1e-06}
+    >>> parse_assignments(["volts=U"], option="--map")
+    {'volts': 'U'}
+    >>> parse_assignments(["R.R"])
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: --param 'R.R': expected NAME=VALUE
+    """
+    out: dict = {}
+    for item in items or ():
+        name, sep, value = str(item).partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep:
+            raise InputDataError(f"{option} {item!r}: expected NAME=VALUE")
+        if not name:
+            raise InputDataError(f"{option} {item!r}: the name before '=' is empty")
+        if not value:
+            raise InputDataError(f"{option} {item!r}: the value after '=' is empty")
+        if name in out:
+            raise InputDataError(f"{option}: {name!r} is given twice")
+        if numeric:
+            try:
+                number = float(value)
+            except ValueError:
+                raise InputDataError(f"{option} {name}: value {value!r} is not a number") from None
+            if not math.isfinite(number):
+                raise InputDataError(f"{option} {name}: value {value!r} is not finite")
+            value = number
+        out[name] = value
+    return out
+
+
+def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = None,
+                   skip: Iterable[str] = ()) -> tuple[np.ndarray, dict[str, Sampled]]:
+    """Read the inputs of ``system`` from a CSV file with a header row.
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV file: a header row of column names, then one row per sample.
+    system : PHSystem
+        The model whose inputs are read.
+    time_column : str
+        Name of the time column (strictly increasing, at least 2 rows).
+    mapping : dict of str -> str, optional
+        ``{COLUMN: SIGNAL}`` from ``--map``; an input not mapped is read from
+        the column of its own name.  Entries naming a measured output are
+        ignored here (they serve the fitting workflows).
+    skip : iterable of str
+        Inputs given another way (not read from the file).
+
+    Returns
+    -------
+    t : ndarray
+        Times of the rows.
+    signals : dict of str -> Sampled
+        One linearly interpolated signal per input.
+
+    Raises
+    ------
+    InputDataError
+        Naming the file, and the column and row where relevant: missing file,
+        missing time or input column, a cell that is not a number, NaN or
+        infinite values, time not strictly increasing, fewer than 2 rows.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from systems.examples import rc_circuit
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = os.path.join(d, "u.csv")
+    ...     _ = open(path, "w").write("t,volts\\n0,0\\n1,2\\n")
+    ...     t, u = read_input_csv(path, rc_circuit(), mapping={"volts": "U"})
+    >>> t.tolist(), float(u["U"](0.5))
+    ([0.0, 1.0], 1.0)
+    """
+    path = os.fspath(path)
+    inputs = system.input_names
+    mapping = dict(mapping or {})
+    column_of: dict[str, str] = {}
+    for column, signal in mapping.items():
+        if signal in inputs:
+            if signal in column_of:
+                raise InputDataError(f"--map: input {signal!r} is mapped from two columns "
+                                     f"({column_of[signal]!r} and {column!r})")
+            column_of[signal] = column
+        elif signal not in system.measured_names:
+            known = ", ".join(inputs + system.measured_names) or "none"
+            raise InputDataError(f"--map {column}={signal}: system {system.name!r} has no input or measured output "
+                                 f"{signal!r} (known: {known})")
+    skip = set(skip)
+    wanted = {u: column_of.get(u, u) for u in inputs if u not in skip}
+
+    header, rows = _read_rows(path)
+    missing = [c for c in [time_column, *wanted.values()] if c not in header]
+    if missing:
+        c = missing[0]
+        what = "time column" if c == time_column else f"column for input {_input_of(wanted, c)!r}"
+        raise InputDataError(f"{path}: no {what} {c!r} (columns: {', '.join(header)})")
+    if len(rows) < 2:
+        raise InputDataError(f"{path}: needs at least 2 data rows, found {len(rows)}")
+    t = _column(path, header, rows, time_column)
+    d = np.diff(t)
+    if np.any(d <= 0):
+        k = int(np.argmax(d <= 0)) + 1
+        kind = "duplicated" if d[k - 1] == 0 else "decreasing"
+        raise InputDataError(f"{path}: time column {time_column!r} is not strictly increasing: row {rows[k][0]} has "
+                             f"t={t[k]:g} after t={t[k - 1]:g} in row {rows[k - 1][0]} ({kind} time)")
+    signals = {u: Sampled(tuple(t), tuple(_column(path, header, rows, c))) for u, c in wanted.items()}
+    return t, signals
+
+
+def _input_of(wanted: dict, column: str) -> str:
+    return next(u for u, c in wanted.items() if c == column)
+
+
+def _read_rows(path: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    """Header and the data rows as ``(spreadsheet row number, cells)``; blank lines are skipped."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            header = None
+            rows = []
+            for cells in reader:
+                if not cells or all(not c.strip() for c in cells):
+                    continue
+                if header is None:
+                    header = [c.strip() for c in cells]
+                    dup = sorted({c for c in header if header.count(c) > 1})
+                    if dup:
+                        raise InputDataError(f"{path}: column {dup[0]!r} appears twice in the header")
+                    continue
+                if len(cells) != len(header):
+                    raise InputDataError(f"{path}: row {reader.line_num} has {len(cells)} cells but the header "
+                                         f"has {len(header)} columns")
+                rows.append((reader.line_num, cells))
+    except FileNotFoundError:
+        raise InputDataError(f"input file {path!r} does not exist") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputDataError(f"cannot read input file {path!r}: {exc}") from None
+    if header is None:
+        raise InputDataError(f"{path}: the file is empty (expected a header row naming the columns)")
+    return header, rows
+
+
+def _column(path: str, header: Sequence[str], rows, name: str) -> np.ndarray:
+    j = header.index(name)
+    out = np.empty(len(rows))
+    for k, (line, cells) in enumerate(rows):
+        cell = cells[j].strip()
+        try:
+            v = float(cell)
+        except ValueError:
+            what = "is empty" if not cell else f"{cell!r} is not a number"
+            raise InputDataError(f"{path}: row {line}, column {name!r}: {what}") from None
+        if not math.isfinite(v):
+            raise InputDataError(f"{path}: row {line}, column {name!r}: value {cell!r} is not finite")
+        out[k] = v
+    return out
+
+
+def input_signals(system, specs: Iterable[str] | None, time_column: str = "t", mapping: dict | None = None,
+                  span: tuple[float, float] | None = None) -> dict[str, Signal]:
+    """Input signals from ``--input`` values: a CSV file, ``NAME=EXPR`` or a bare ``EXPR``.
+
+    A bare expression is allowed when the system has exactly one input.
+    Inputs given neither way are left out (the simulator makes them zero).
+
+    Parameters
+    ----------
+    system : PHSystem
+        The model whose inputs are given.
+    specs : iterable of str
+        The ``--input`` values.
+    time_column, mapping
+        As for :func:`read_input_csv`.
+    span : (float, float), optional
+        Simulated time interval, which a CSV file must cover.
+
+    Returns
+    -------
+    dict of str -> Signal
+
+    Raises
+    ------
+    InputDataError
+        Naming the value: unknown input, an input given twice, a bare
+        expression for a system with several inputs, an unreadable
+        expression or CSV file, a CSV file not covering ``span``.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> sig = input_signals(rc_circuit(), ["U=step(2.0)"])
+    >>> float(sig["U"](1.0))
+    2.0
+    """
+    names = system.input_names
+    signals: dict[str, Signal] = {}
+    csv_files = []
+    for spec in specs or ():
+        spec = str(spec).strip()
+        if spec.lower().endswith(".csv"):
+            csv_files.append(spec)
+            continue
+        m = _ASSIGN.match(spec)
+        if m:
+            name, text = m.group(1), m.group(2).strip()
+            if name not in names:
+                raise InputDataError(f"--input {spec!r}: system {system.name!r} has no input {name!r} "
+                                     f"(inputs: {', '.join(names) or 'none'})")
+        elif len(names) == 1:
+            name, text = names[0], spec
+        else:
+            raise InputDataError(f"--input {spec!r}: write NAME=EXPR; system {system.name!r} has "
+                                 f"{len(names)} inputs ({', '.join(names) or 'none'})")
+        if name in signals:
+            raise InputDataError(f"--input: input {name!r} is given twice")
+        if not text:
+            raise InputDataError(f"--input {spec!r}: the expression is empty")
+        try:
+            signals[name] = parse_expression(text)
+        except InputDataError as exc:
+            raise InputDataError(f"--input {name}: {exc}") from None
+    if mapping and not csv_files:
+        raise InputDataError("--map needs an input CSV file (--input FILE.csv)")
+    if len(csv_files) > 1:
+        raise InputDataError(f"--input: give at most one CSV file (got {', '.join(csv_files)})")
+    if csv_files:
+        path = csv_files[0]
+        t, read = read_input_csv(path, system, time_column, mapping, skip=signals)
+        if span is not None:
+            tol = 1e-9 * max(abs(span[1] - span[0]), 1e-300)
+            if t[0] > span[0] + tol or t[-1] < span[1] - tol:
+                raise InputDataError(f"{path}: column {time_column!r} covers t = {t[0]:g} .. {t[-1]:g} but the "
+                                     f"simulation runs over {span[0]:g} .. {span[1]:g}")
+        signals.update(read)
+    return signals
