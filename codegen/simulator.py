@@ -279,6 +279,9 @@ class Simulator:
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))
         X[0] = x
+        U = np.zeros((len(t), len(s.inputs)))
+        if segs:
+            U[0] = self._eval_inputs(sigs, slots, segs[0][2], t[:1])[0]
         z = x / self.scale
         qacc = np.zeros(nq)
         nrun = 0
@@ -294,27 +297,24 @@ class Simulator:
                 F, layout = self._integrator(rn, slots, sampled)
                 P = self._pvec(p, ra, rh, layout, choice, sampled_vals)
                 try:
-                    out = F(x0=z, p=P)
+                    zs, qs = _call_into_numpy(F, z, P, len(x), rn, nq)
                 except RuntimeError as exc:
-                    self._localize_failure(F, z, p, ra, rh, rn, slots, sampled, layout, choice, sampled_vals, exc)
-                zs = np.asarray(out["xf"]).reshape(len(x), rn, order="F").T
-                qs = np.asarray(out["qf"]).reshape(nq, rn, order="F").T
+                    self._localize_failure(F, z, p, ra, rh, rn, slots, sampled, layout, choice, sampled_vals, exc, sigs)
                 times = ra + rh * np.arange(1, rn + 1)
                 xs = zs * self.scale
                 if not np.all(np.isfinite(xs)):
                     k = int(np.argmin(np.all(np.isfinite(xs), axis=1)))
                     raise SimulationError(f"simulation of {s.name!r}: non-finite state at t={times[k]:.6g}: " + _fmt_state(s, xs[k]))
-                uu = self._inputs_at(sigs, times)
+                uu = self._eval_inputs(sigs, slots, choice, times)
                 self._check_domain(xs, times, p, uu)
-                for k, tk in enumerate(times):
-                    j = int(np.searchsorted(t, tk - 1e-12 * max(1.0, abs(tk))))
-                    if j < len(t) and abs(t[j] - tk) <= 1e-9 * max(1.0, abs(tk), rh):
-                        X[j] = xs[k]
-                        Q[j] = qacc + qs[k]
+                j = np.minimum(np.searchsorted(t, times - 1e-12 * np.maximum(1.0, np.abs(times))), len(t) - 1)
+                on_grid = np.abs(t[j] - times) <= 1e-9 * np.maximum(np.maximum(1.0, np.abs(times)), rh)
+                X[j[on_grid]] = xs[on_grid]
+                Q[j[on_grid]] = qacc + qs[on_grid]
+                U[j[on_grid]] = uu[on_grid]
                 qacc = qacc + qs[-1]
                 z = zs[-1]
                 nrun += 1
-        U = self._inputs_at(sigs, t)
         res = SimulationResult(s, t, X, U, p, stats={"runs": nrun, "seconds": _time.perf_counter() - wall,
                                                      "method": "cvodes", "rtol": self.rtol, "atol": self.atol})
         res.quadratures = {"E_supplied": Q[:, 0], "E_dissipated": Q[:, 1]}
@@ -356,6 +356,22 @@ class Simulator:
                 parts.append(vals if k == active else [0.0] * nc)
         return np.concatenate([np.asarray(v, dtype=float).reshape(-1) for v in parts])
 
+    def _eval_inputs(self, sigs, slots, choice, times) -> np.ndarray:
+        """Inputs at ``times`` inside one segment, from the segment's templates and constants."""
+        out = np.empty((len(times), len(sigs)))
+        for j, sg in enumerate(sigs):
+            if isinstance(sg, Sampled):
+                out[:, j] = sg(times)
+                continue
+            k, vals = choice[j]
+            key, tmpl, nc = slots[j][k]
+            f = self._templates.get(key)
+            if f is None:
+                f = sp.lambdify([TIME] + [sp.Symbol(f"_c{i}", real=True) for i in range(nc)], tmpl, "numpy")
+                self._templates[key] = f
+            out[:, j] = np.broadcast_to(np.asarray(f(times, *vals), dtype=float), times.shape)
+        return out
+
     def _inputs_at(self, sigs, times) -> np.ndarray:
         if not sigs:
             return np.zeros((len(times), 0))
@@ -378,7 +394,8 @@ class Simulator:
                 + "state: " + _fmt_state(s, xs[k])
             )
 
-    def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, sampled_vals, exc):
+    def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, sampled_vals, exc, sigs):
+        """Re-run the failed run one output step at a time to name the failing interval and state."""
         s = self.system
         F1, _ = self._integrator(1, slots, sampled)
         zc = z
@@ -389,8 +406,7 @@ class Simulator:
             except RuntimeError:
                 xs = zc * self.scale
                 tk = a + k * h
-                self._check_domain(xs[None, :], np.array([tk]), p, self._inputs_at(self._last_sigs, np.array([tk]))
-                                   if hasattr(self, "_last_sigs") else np.zeros((1, len(s.inputs))))
+                self._check_domain(xs[None, :], np.array([tk]), p, self._eval_inputs(sigs, slots, choice, np.array([tk])))
                 raise SimulationError(
                     f"simulation of {s.name!r}: the integrator failed between t={tk:.6g} and t={tk + h:.6g}; "
                     f"state at t={tk:.6g}: " + _fmt_state(s, xs) + f" ({str(exc).splitlines()[-1][:200]})"
@@ -399,6 +415,25 @@ class Simulator:
                 break
         raise SimulationError(f"simulation of {s.name!r}: the integrator failed in [{a:.6g}, {a + n * h:.6g}] "
                               f"({str(exc).splitlines()[-1][:200]})") from None
+
+
+def _call_into_numpy(F, z0, P, nx: int, n: int, nq: int):
+    """Call an integrator writing its outputs straight into numpy arrays (no DM -> numpy copy).
+
+    CasADi stores the (nx, n) output column-major, which is the memory layout of a
+    C-ordered (n, nx) array: the rows are the states at each output time.
+    """
+    buf, trigger = F.buffer()
+    z0 = np.ascontiguousarray(z0, dtype=float)
+    P = np.ascontiguousarray(P, dtype=float)
+    zs = np.empty((n, nx))
+    qs = np.empty((n, nq))
+    buf.set_arg(0, memoryview(z0))
+    buf.set_arg(2, memoryview(P))
+    buf.set_res(0, memoryview(zs))
+    buf.set_res(2, memoryview(qs))
+    trigger()
+    return zs, qs
 
 
 def _runs(pts):

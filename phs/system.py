@@ -277,6 +277,21 @@ class PHSystem:
         name = kw.pop("name", self.name)
         return PHSystem(name, **kw)
 
+    def with_measured(self, *measured: Measured) -> PHSystem:
+        """New system with extra measured outputs (names must be new).
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> s = rc_circuit()
+        >>> s.with_measured(Measured("i", s.port_output[0], "A")).measured_names
+        ['v_C', 'i']
+        """
+        clash = [m.name for m in measured if m.name in self.measured_names]
+        if clash:
+            raise ModelError(f"system {self.name!r} already has measured output(s) {clash}")
+        return self._replace(measured=self.measured + tuple(measured))
+
     def renamed(self, name: str) -> PHSystem:
         """Same system under another name."""
         return self._replace(name=name)
