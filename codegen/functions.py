@@ -16,6 +16,7 @@ import weakref
 from dataclasses import dataclass
 
 import casadi as ca
+import sympy as sp
 
 from codegen.translate import Translator
 from phs.params import c_identifier
@@ -82,6 +83,8 @@ def generate(system: PHSystem) -> GeneratedFunctions:
     dissipated = ca.mtimes(z.T, ca.mtimes(D, z)) if nu else ca.mtimes(dH.T, ca.mtimes(R, dH))
     supplied = ca.dot(y, u) if nu else ca.SX(0)
     dHdt = ca.dot(dH, xdot)
+    for k, inp in enumerate(system.inputs):  # measured outputs may refer to port outputs by name
+        tr.memo[sp.Symbol(inp.output, real=True)] = y[k]
     meas = ca.vertcat(*[tr(m.expr) for m in system.measured]) if system.measured else ca.SX(0, 1)
     conds = ca.vertcat(*[tr(c.expr) for c in system.conditions]) if system.conditions else ca.SX(0, 1)
     dparts = []

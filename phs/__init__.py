@@ -5,7 +5,7 @@ and scipy only.  Workflows that run models (simulation, identification,
 diagnosis, sweeps) are exposed lazily so ``import phs`` never imports casadi.
 """
 
-from phs.component import Component, symbol_of_input, symbol_of_state
+from phs.component import Component, symbol_of_input, symbol_of_output, symbol_of_state
 from phs.errors import (
     DomainError,
     EquilibriumError,
@@ -28,7 +28,7 @@ from phs import signals
 __version__ = "0.1.0"
 
 __all__ = [
-    "Component", "symbol_of_input", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
+    "Component", "symbol_of_input", "symbol_of_output", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
     "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
     "bond", "feedback_link", "feedback", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
     "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "load",

@@ -211,6 +211,17 @@ def symbol_of_state(name: str) -> sp.Symbol:
     return state_symbol(check_name(name, "state"))
 
 
+def symbol_of_output(name: str) -> sp.Symbol:
+    """Symbol of a port output (``"U.i"``) for use in measured outputs.
+
+    Examples
+    --------
+    >>> symbol_of_output("U.i")
+    U.i
+    """
+    return sp.Symbol(check_name(name, "output"), real=True)
+
+
 def symbol_of_input(name: str) -> sp.Symbol:
     """Symbol to use in measured outputs that refer to an input."""
     return input_symbol(check_name(name, "input"))

@@ -42,9 +42,16 @@ def subsystem_piece(system) -> Piece:
         diss.append(Dissipator(f"{n}.{label}", (), power))
     return Piece(
         n, storages=tuple(storages), energy=tuple(system.energy_terms), ports=tuple(ports), relations=tuple(rels),
-        dissipators=tuple(diss), params=tuple(system.params), measured=tuple(system.measured),
+        dissipators=tuple(diss), params=tuple(system.params), measured=_state_measured(system),
         conditions=tuple(system.conditions),
     )
+
+
+def _state_measured(system) -> tuple:
+    """Measured outputs that depend on states and parameters only (those that depend on the
+    subsystem's inputs or port outputs have no meaning once its inputs become internal ports)."""
+    allowed = set(system.x) | set(system.p)
+    return tuple(m for m in system.measured if sp.sympify(m.expr).free_symbols <= allowed)
 
 
 class _ExternalInput(Component):

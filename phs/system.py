@@ -284,7 +284,8 @@ class PHSystem:
         --------
         >>> from systems.examples import rc_circuit
         >>> s = rc_circuit()
-        >>> s.with_measured(Measured("i", s.port_output[0], "A")).measured_names
+        >>> from phs.component import symbol_of_output
+        >>> s.with_measured(Measured("i", 1e3 * symbol_of_output("U.i"), "mA")).measured_names
         ['v_C', 'i']
         """
         clash = [m.name for m in measured if m.name in self.measured_names]
@@ -315,9 +316,22 @@ class PHSystem:
         return (self.G + self.P).T * self.grad_H + (self.S + self.N) * u
 
     @cached_property
+    def measured_expressions(self) -> list[sp.Expr]:
+        """Measured outputs as expressions of state and input (port outputs they refer to substituted)."""
+        outs = {sp.Symbol(i.output, real=True): k for k, i in enumerate(self.inputs)}
+        exprs = []
+        for mo in self.measured:
+            e = sp.sympify(mo.expr)
+            used = e.free_symbols & outs.keys()
+            if used:
+                e = e.xreplace({o: self.port_output[outs[o]] for o in used})
+            exprs.append(e)
+        return exprs
+
+    @cached_property
     def dissipation_matrix(self) -> sp.Matrix:
         """[[R, P], [P^T, S]], the quadratic form of dissipated power in z = [dH/dx; u]."""
-        return sp.BlockMatrix([[self.R, self.P], [self.P.T, self.S]]).as_explicit()
+        return sp.Matrix.vstack(sp.Matrix.hstack(self.R, self.P), sp.Matrix.hstack(self.P.T, self.S))
 
     @cached_property
     def power_balance(self) -> dict[str, sp.Expr]:
@@ -390,26 +404,40 @@ class PHSystem:
             look(t.expr, f"energy term {t.label!r}", known)
         for nm, M in (("J", self.J), ("R", self.R), ("G", self.G), ("P", self.P), ("S", self.S), ("N", self.N)):
             look(M, nm, known)
+        outs = {sp.Symbol(i.output, real=True) for i in self.inputs}
         for mo in self.measured:
-            look(sp.sympify(mo.expr), f"measured output {mo.name!r}", known_u)
+            look(sp.sympify(mo.expr), f"measured output {mo.name!r}", known_u | outs)
         for c in self.conditions:
             look(c.expr, f"condition {c.label!r}", known_u)
 
     def _check_structure(self, problems: list[str]) -> None:
-        n = len(self.states)
-        for i in range(n):
-            for j in range(i, n):
-                a, b = self.J[i, j], self.J[j, i]
-                if a == 0 and b == 0:
-                    continue
-                if sp.expand(a + b) != 0 and sp.simplify(a + b) != 0:
-                    problems.append(f"J is not skew-symmetric: J[{i},{j}] + J[{j},{i}] = {sp.simplify(a + b)} "
-                                    f"({self.states[i].name}, {self.states[j].name})")
+        def pairs(M):
+            """Index pairs (i < j) where M or its transpose has a nonzero entry."""
+            keys = set()
+            for (i, j) in M.todok():
+                if i != j:
+                    keys.add((min(i, j), max(i, j)))
+            return sorted(keys)
+
+        def differs(a, b) -> bool:
+            d = a - b
+            return d != 0 and sp.expand(d) != 0 and sp.simplify(d) != 0
+
+        names = self.state_names + self.input_names
+        for i, j in pairs(self.J):
+            if differs(self.J[i, j], -self.J[j, i]):
+                problems.append(f"J is not skew-symmetric: J[{i},{j}] + J[{j},{i}] = {sp.simplify(self.J[i, j] + self.J[j, i])} "
+                                f"({names[i]}, {names[j]})")
+        for i in range(len(self.states)):
+            if self.J[i, i] != 0 and sp.simplify(self.J[i, i]) != 0:
+                problems.append(f"J is not skew-symmetric: J[{i},{i}] = {self.J[i, i]} ({names[i]})")
         D = self.dissipation_matrix
-        for i in range(D.rows):
-            for j in range(i + 1, D.rows):
-                if D[i, j] != D[j, i] and sp.simplify(D[i, j] - D[j, i]) != 0:
-                    problems.append(f"R (with P, S) is not symmetric at entry ({i},{j})")
+        for i, j in pairs(D):
+            if differs(D[i, j], D[j, i]):
+                problems.append(f"R (with P, S) is not symmetric at entry ({i},{j}) ({names[i]}, {names[j]})")
+        for i, j in pairs(self.N):
+            if differs(self.N[i, j], -self.N[j, i]):
+                problems.append(f"N is not skew-symmetric at entry ({i},{j})")
         if problems:
             return
         # numeric PSD test at sampled points of the declared ranges: refuse what is certainly wrong
