@@ -286,6 +286,10 @@ class Simulator:
         qacc = np.zeros(nq)
         nrun = 0
         for a, b, choice in segs:
+            # inputs are right-continuous: a grid point on a breakpoint sees the new segment's input
+            ja = int(np.searchsorted(t, a - 1e-12 * max(1.0, abs(a))))
+            if ja < len(t) and abs(t[ja] - a) <= 1e-9 * max(1.0, abs(a)):
+                U[ja] = self._eval_inputs(sigs, slots, choice, np.array([a]))[0]
             i0 = int(np.searchsorted(t, a, side="left"))
             i1 = int(np.searchsorted(t, b, side="left"))
             # output indices strictly inside (a, b], plus b itself if it is a grid point
@@ -311,7 +315,10 @@ class Simulator:
                 on_grid = np.abs(t[j] - times) <= 1e-9 * np.maximum(np.maximum(1.0, np.abs(times)), rh)
                 X[j[on_grid]] = xs[on_grid]
                 Q[j[on_grid]] = qacc + qs[on_grid]
-                U[j[on_grid]] = uu[on_grid]
+                keep = on_grid & (np.abs(times - b) > 1e-12 * max(1.0, abs(b)))  # b belongs to the next segment
+                U[j[keep]] = uu[keep]
+                if abs(times[-1] - b) <= 1e-12 * max(1.0, abs(b)) and b >= t[-1] - 1e-12 * max(1.0, abs(b)):
+                    U[j[-1]] = uu[-1]  # the final time has no next segment
                 qacc = qacc + qs[-1]
                 z = zs[-1]
                 nrun += 1

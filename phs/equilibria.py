@@ -9,7 +9,12 @@ initial state.  They need not be known in closed form: the leaf through
 null space) are carried along a straight path of the free coordinates
 ``x_F`` by integrating ``W_D dx_D = -W_F dx_F``, where the rows of ``W(x)``
 span the left null space at each point, and the free coordinates are found
-by least squares on the rate equations.
+by pseudo-transient continuation (backward-Euler steps of growing size, ending
+in Newton's method) on the free rate equations, each trial point transported
+along the leaf from the previous one (the leaf is path-independent) and the
+Jacobian restricted to the leaf by the chain rule ``dx_D/dx_F = -W_D^-1 W_F``.
+Started from a state at rest it converges to the stable equilibrium the
+dynamics would reach.
 """
 
 from __future__ import annotations
@@ -20,9 +25,9 @@ from numbers import Real
 import numpy as np
 import scipy.integrate
 import scipy.linalg
-import scipy.optimize
 
 from phs.errors import EquilibriumError, InputDataError
+
 
 
 @dataclass(frozen=True)
@@ -68,7 +73,8 @@ def _vector(system, spec, names, what, default) -> np.ndarray:
     return arr
 
 
-def equilibrium(system, u=None, x0=None, params=None, *, tol: float = 1e-10, max_nfev: int = 400) -> EquilibriumResult:
+def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float = 1e-10,
+                max_nfev: int = 500, h0: float = 1e-6) -> EquilibriumResult:
     """Equilibrium of ``system`` under the constant input ``u`` on the leaf through ``x0``.
 
     Parameters
@@ -81,6 +87,12 @@ def equilibrium(system, u=None, x0=None, params=None, *, tol: float = 1e-10, max
         ``x0`` (default: zero clipped into the state ranges).
     params : dict, optional
         Parameter overrides.
+    guess : dict, optional
+        Starting values of some states (moved onto the leaf through ``x0`` first).
+    max_nfev : int
+        Maximum number of pseudo-transient steps.
+    h0 : float
+        First pseudo-time step [s]; it grows as the residual falls.
     tol : float
         Required residual ``max_i |x'_i| / s_i`` relative to the largest scaled rate at ``x0``
         (``s_i`` are the states' typical magnitudes).
@@ -107,28 +119,41 @@ def equilibrium(system, u=None, x0=None, params=None, *, tol: float = 1e-10, max
     xs = _vector(system, x0, names, "state x0", base)
     uv = _vector(system, u, system.input_names, "input u", np.zeros(len(system.inputs)))
     p = system.param_vector(params)
-    f = system.lambdify(system.dynamics)
+    fdyn = system.lambdify(system.dynamics)
     import sympy as sp
 
     A = system.lambdify(sp.Matrix.hstack(system.J - system.R, system.G - system.P))
 
     def rate(x):
         with np.errstate(all="ignore"):
-            return np.asarray(f(x, uv, p), dtype=float).reshape(-1)
+            return np.asarray(fdyn(x, uv, p), dtype=float).reshape(-1)
 
     def null_rows(x):
-        M = np.asarray(A(x, uv, p), dtype=float)
-        Ms = M * s[:, None] if M.size else M  # row scaling by state scales: W acts on scaled rates
+        """Rows w (in state coordinates) with w^T [J - R, G - P] = 0: the conserved directions.
+
+        Rows (rates) are scaled by 1/s and columns equilibrated, so that only exact structural
+        dependences fall below the threshold, not the slow modes of a stiff model (their singular
+        values are ~1e-8 of the largest in an electrostatic actuator, structural zeros ~1e-16).
+        """
+        with np.errstate(all="ignore"):
+            M = np.asarray(A(x, uv, p), dtype=float)
         if M.size == 0:
             return np.zeros((0, len(x)))
+        if not np.all(np.isfinite(M)):
+            raise EquilibriumError(f"equilibrium of {system.name!r}: the structure is not finite along the leaf")
+        Ms = M / s[:, None]
+        cn = np.linalg.norm(Ms, axis=0)
+        Ms = Ms[:, cn > 0] / cn[cn > 0]
+        if Ms.shape[1] == 0:
+            return np.diag(1 / s)
         U, sv, _ = np.linalg.svd(Ms)
-        r = int(np.sum(sv > 1e-10 * (sv[0] if sv.size and sv[0] > 0 else 1.0)))
-        return (U[:, r:].T) * s[None, :]  # rows w with w^T (J-R, G-P) = 0, in unscaled state coordinates
+        r = int(np.sum(sv > 1e-12 * sv[0])) if sv.size and sv[0] > 0 else 0
+        return U[:, r:].T / s[None, :]
 
     W0 = null_rows(xs)
     k = W0.shape[0]
     if k:
-        _, _, piv = scipy.linalg.qr(W0 / s[None, :] * s[None, :] * s[None, :], pivoting=True)
+        _, _, piv = scipy.linalg.qr(W0 * s[None, :], pivoting=True)  # pivot on scaled coordinates
         dep = sorted(piv[:k].tolist())
     else:
         dep = []
@@ -136,46 +161,100 @@ def equilibrium(system, u=None, x0=None, params=None, *, tol: float = 1e-10, max
     r0 = rate(xs) / s
     rscale = max(float(np.max(np.abs(r0))) if np.all(np.isfinite(r0)) else 1.0, 1e-300)
 
-    def complete(xf):
+    def transport(x_from, xf_to):
+        """Move along the leaf from ``x_from`` to free coordinates ``xf_to`` (straight path in x_F)."""
+        x = x_from.copy()
         if not dep:
-            x = xs.copy()
-            x[free] = xf
+            x[free] = xf_to
             return x
-        dxf = xf - xs[free]
+        dxf = xf_to - x_from[free]
 
         def ode(_t, xd):
-            x = xs.copy()
-            x[free] = xs[free] + _t * dxf
-            x[dep] = xd
-            W = null_rows(x)
-            if W.shape[0] != k:
-                W = W[:k] if W.shape[0] > k else np.vstack([W, np.zeros((k - W.shape[0], len(x)))])
+            y = x_from.copy()
+            y[free] = x_from[free] + _t * dxf
+            y[dep] = xd
+            W = null_rows(y)[:k]
             return np.linalg.solve(W[:, dep], -W[:, free] @ dxf)
 
-        sol = scipy.integrate.solve_ivp(ode, (0.0, 1.0), xs[dep], rtol=1e-11, atol=1e-13 * s[dep], method="DOP853")
-        if not sol.success:
+        try:
+            sol = scipy.integrate.solve_ivp(ode, (0.0, 1.0), x_from[dep], rtol=1e-11, atol=1e-13 * s[dep],
+                                            method="DOP853")
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise EquilibriumError(f"equilibrium of {system.name!r}: could not follow the conserved quantities: {exc}")
+        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
             raise EquilibriumError(f"equilibrium of {system.name!r}: could not follow the conserved quantities: {sol.message}")
-        x = xs.copy()
-        x[free] = xf
+        x[free] = xf_to
         x[dep] = sol.y[:, -1]
         return x
 
-    def resid(zf):
-        try:
-            x = complete(zf * s[free])
-        except (np.linalg.LinAlgError, EquilibriumError):
-            return np.full(len(xs), 1e6)
-        r = rate(x) / s / rscale
-        return np.where(np.isfinite(r), r, 1e6)
+    fjac = system.lambdify(system.dynamics_jacobian)
 
-    z0 = xs[free] / s[free]
-    sol = scipy.optimize.least_squares(resid, z0, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=max_nfev)
-    x = complete(sol.x * s[free])
+    def jac_full(x):
+        """d rate / d (x / s), exact (finite differences lose the slow modes of stiff models)."""
+        with np.errstate(all="ignore"):
+            Jx = np.asarray(fjac(x, uv, p), dtype=float).reshape(len(x), len(x))
+        return Jx * s[None, :]
+
+    def on_leaf(Jx, x):
+        """Restrict to the free coordinates with the chain rule x_D(x_F): dx_D/dx_F = -W_D^-1 W_F."""
+        JF = Jx[:, free]
+        if dep:
+            W = null_rows(x)[:k] * s[None, :]  # in scaled coordinates
+            JF = JF - Jx[:, dep] @ np.linalg.solve(W[:, dep], W[:, free])
+        return JF
+
+    # Pseudo-transient continuation on the leaf: backward-Euler steps of growing size h on the
+    # free coordinates, (I/h - df_F/dx_F) dx_F = f_F, the dependent coordinates transported along
+    # the leaf.  Small h follows the dynamics (robust from far away, towards stable equilibria);
+    # as h grows the step becomes Newton's on f_F = 0, which is square: on the leaf the dependent
+    # rates follow from the free ones (w^T x' = 0).
+    x = xs.copy()
+    if guess is not None:
+        xg = _vector(system, guess, names, "state guess", xs)
+        x = transport(xs, xg[free])
+    f = rate(x)
+    if not np.all(np.isfinite(f)):
+        raise EquilibriumError(f"equilibrium of {system.name!r}: the dynamics are not finite at the starting point")
+    nfev, h = 0, float(h0)
+    norm = float(np.linalg.norm(f[free] / s[free]))
+    for _ in range(max_nfev):
+        if np.max(np.abs(f / s)) / rscale <= tol * 1e-2:
+            break
+        JF = on_leaf(jac_full(x), x)[free]  # d (f_F / s_F) / d (x_F / s_F) up to the row scaling below
+        JF = JF / s[free][:, None]
+        accepted = False
+        for _try in range(30):
+            M = np.eye(len(free)) / h - JF
+            try:
+                dz = np.linalg.solve(M, f[free] / s[free])
+            except np.linalg.LinAlgError:
+                h /= 10
+                continue
+            try:
+                xt = transport(x, x[free] + dz * s[free])
+            except EquilibriumError:
+                h /= 10
+                continue
+            nfev += 1
+            ft = rate(xt)
+            nt = float(np.linalg.norm(ft[free] / s[free])) if np.all(np.isfinite(ft)) else np.inf
+            if nt == np.inf:
+                h /= 10
+                continue
+            # switched evolution relaxation: backward Euler is stable for any h on stable dynamics,
+            # so every finite step is kept and h grows as the residual falls
+            x, f = xt, ft
+            h = min(h * min(max(norm / max(nt, 1e-300), 0.5), 10.0) * 1.5, 1e15)
+            norm = nt
+            accepted = True
+            break
+        if not accepted:
+            break
     res = float(np.max(np.abs(rate(x) / s))) / rscale if len(x) else 0.0
     if not np.isfinite(res) or res > tol:
         raise EquilibriumError(
-            f"no equilibrium of {system.name!r} found for u={dict(zip(system.input_names, uv))}: "
+            f"no equilibrium of {system.name!r} found for u={dict(zip(system.input_names, map(float, uv)))}: "
             f"scaled residual {res:.3g} > {tol:g} at " + ", ".join(f"{n}={v:.6g}" for n, v in zip(names, x))
+            + " (give a better starting point with guess=)"
         )
-    return EquilibriumResult(system.name, tuple(names), x, uv, res, k, tuple(names[i] for i in dep),
-                             {"nfev": sol.nfev, "status": sol.status})
+    return EquilibriumResult(system.name, tuple(names), x, uv, res, k, tuple(names[i] for i in dep), {"nfev": nfev})

@@ -310,6 +310,11 @@ class PHSystem:
         return (self.J - self.R) * self.grad_H + (self.G - self.P) * u
 
     @cached_property
+    def dynamics_jacobian(self) -> sp.Matrix:
+        """Jacobian of the right-hand side with respect to the states (symbolic)."""
+        return self.dynamics.jacobian(self.x)
+
+    @cached_property
     def port_output(self) -> sp.Matrix:
         """Power-conjugate outputs y."""
         u = sp.Matrix(self.u) if self.inputs else sp.zeros(0, 1)
