@@ -70,3 +70,24 @@ def summary(system) -> str:
         lines.append(f"  validity conditions ({len(system.conditions)}): " + "; ".join(c.label for c in system.conditions[:6])
                      + (" ..." if len(system.conditions) > 6 else ""))
     return "\n".join(lines)
+
+
+def param_table(params) -> str:
+    """Markdown table of parameters (name, value, unit, range, description).
+
+    ``params`` is a PHSystem or a sequence of Param; docs tables are generated
+    with it, never retyped.
+
+    Examples
+    --------
+    >>> from phs import Param
+    >>> print(param_table([Param("K_b", 0.04, "N*m/rad", "torsional stiffness")]))
+    | parameter | value | unit | range | description |
+    | --- | --- | --- | --- | --- |
+    | `K_b` | 0.04 | N*m/rad | 0.004 .. 0.4 | torsional stiffness |
+    """
+    items = getattr(params, "params", params)
+    lines = ["| parameter | value | unit | range | description |", "| --- | --- | --- | --- | --- |"]
+    for q in items:
+        lines.append(f"| `{q.name}` | {q.value:.6g} | {q.unit} | {q.range[0]:.4g} .. {q.range[1]:.4g} | {q.description} |")
+    return "\n".join(lines)
