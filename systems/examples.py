@@ -7,7 +7,17 @@ from __future__ import annotations
 
 import sympy as sp
 
-from components import Capacitor, Damper, ForceSource, Inductor, Mass, NonlinearSpring, LinearSpring, Resistor, VoltageSource
+from components import (
+    Capacitor,
+    Damper,
+    ForceSource,
+    Inductor,
+    LinearSpring,
+    Mass,
+    NonlinearSpring,
+    Resistor,
+    VoltageSource,
+)
 from phs import Measured, interconnect, series, symbol_of_state
 
 
