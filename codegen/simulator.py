@@ -285,6 +285,8 @@ class Simulator:
         z = x / self.scale
         qacc = np.zeros(nq)
         nrun = 0
+        if len(x) == 0:  # a static network: nothing to integrate, outputs follow the inputs
+            return self._static_result(t, sigs, segs, slots, p, wall)
         for a, b, choice in segs:
             # inputs are right-continuous: a grid point on a breakpoint sees the new segment's input
             ja = int(np.searchsorted(t, a - 1e-12 * max(1.0, abs(a))))
@@ -327,6 +329,22 @@ class Simulator:
         res.quadratures = {"E_supplied": Q[:, 0], "E_dissipated": Q[:, 1]}
         for k, (label, _) in enumerate(s.dissipators):
             res.quadratures[f"E_dissipated[{label}]"] = Q[:, 2 + k]
+        return res
+
+    def _static_result(self, t, sigs, segs, slots, p, wall) -> SimulationResult:
+        U = np.zeros((len(t), len(sigs)))
+        for a, b, choice in segs:
+            sel = (t >= a) & ((t < b) | (b >= t[-1]))
+            U[sel] = self._eval_inputs(sigs, slots, choice, t[sel])
+        res = SimulationResult(self.system, t, np.zeros((len(t), 0)), U, p,
+                               stats={"runs": 0, "seconds": _time.perf_counter() - wall, "method": "static"})
+
+        def cumtrapz(v):
+            return np.concatenate([[0.0], np.cumsum(np.diff(t) * (v[1:] + v[:-1]) / 2)])
+
+        res.quadratures = {"E_supplied": cumtrapz(res.supplied), "E_dissipated": cumtrapz(res.dissipated)}
+        for label, power in res.dissipator_powers.items():
+            res.quadratures[f"E_dissipated[{label}]"] = cumtrapz(power)
         return res
 
     def initial_state(self, x0) -> np.ndarray:

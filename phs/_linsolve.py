@@ -98,17 +98,72 @@ def solve_blt(equations: list[sp.Expr], unknowns: list[sp.Symbol]) -> dict[sp.Sy
             rest = e.xreplace({z: 0})
             sol[z] = _tidy(-rest / a)
         else:
-            A = sp.Matrix([[sp.diff(e, z) for z in unk] for e in sub])
-            if A.free_symbols & uset:
-                raise StructuralProblem("nonlinear", eqs, unk)
-            rhs = sp.Matrix([-e.xreplace({z: 0 for z in unk}) for e in sub])
-            det = A.det(method="berkowitz")
-            if sp.expand(det) == 0:
-                raise StructuralProblem("singular", eqs, unk)
-            x = A.LUsolve(rhs)
-            for z, v in zip(unk, x):
-                sol[z] = _tidy(v)
+            for z, v in _eliminate(sub, unk, uset, eqs).items():
+                sol[z] = v
     return sol
+
+
+def _eliminate(eqs: list[sp.Expr], unk: list[sp.Symbol], uset: set, labels: list[int]) -> dict:
+    """Solve one algebraic loop by sparse symbolic elimination (tearing).
+
+    At each step the pivot is the (equation, unknown) pair with the fewest unknowns in the
+    equation, then the unknown occurring in the fewest equations, then the simplest coefficient:
+    a chain of resistors collapses to one equation in the loop current instead of a dense
+    LU factorisation whose expressions grow combinatorially.
+    """
+    eqs = list(eqs)
+    rest = set(unk)
+    order: list[tuple[sp.Symbol, sp.Expr]] = []
+    while eqs:
+        occ = {z: 0 for z in rest}
+        fs = []
+        for e in eqs:
+            f = e.free_symbols & rest
+            fs.append(f)
+            for z in f:
+                occ[z] += 1
+        best = None
+        for i, e in enumerate(eqs):
+            for z in fs[i]:
+                a = sp.diff(e, z)
+                if a.free_symbols & uset:
+                    raise StructuralProblem("nonlinear", labels, list(unk))
+                if a == 0:
+                    continue
+                score = (len(fs[i]), occ[z], sp.count_ops(a), str(z))
+                if best is None or score < best[0]:
+                    best = (score, i, z, a)
+        if best is None:
+            raise StructuralProblem("singular", labels, list(unk))
+        _, i, z, a = best
+        e = eqs.pop(i)
+        val = -e.xreplace({z: 0}) / a
+        order.append((z, val))
+        rest.discard(z)
+        eqs = [ee.xreplace({z: val}) for ee in eqs]
+        if any(ee != 0 and not (ee.free_symbols & rest) and not _vanishes(ee) for ee in eqs):
+            raise StructuralProblem("singular", labels, list(unk))
+        eqs = [ee for ee in eqs if ee.free_symbols & rest]
+    if rest:
+        raise StructuralProblem("singular", labels, list(rest))
+    final: dict[sp.Symbol, sp.Expr] = {}
+    for z, v in reversed(order):
+        final[z] = v.xreplace(final) if v.free_symbols & final.keys() else v
+    return final
+
+
+def _vanishes(expr: sp.Expr) -> bool:
+    """Whether an expression is identically zero, tested at random positive values of its symbols."""
+    rng = np.random.default_rng(12345)
+    for _ in range(3):
+        vals = {s: float(rng.uniform(0.5, 2.0)) for s in expr.free_symbols}
+        try:
+            v = complex(expr.xreplace(vals).evalf())
+        except (TypeError, ValueError):
+            return False
+        if abs(v) > 1e-9:
+            return False
+    return True
 
 
 def _tidy(expr: sp.Expr) -> sp.Expr:

@@ -190,7 +190,8 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
                 k = len(bond_vars) // 2
                 e, f = sp.Symbol(f"e[bond{k}]", real=True), sp.Symbol(f"f[bond{k}]", real=True)
                 bond_vars.extend([e, f])
-                members.append((e, f, +1 if isinstance(m, str) and m.startswith("-") else -1))
+                flip = -1 if isinstance(m, str) and m.startswith("-") else 1
+                members.append((flip * e, flip * f, -1))  # reversed: the parent sees (-e, -f)
                 ensure(target)
                 junction_members[id(target)][1].append((e, f, +1))
                 continue
@@ -202,7 +203,9 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
                 continue
             used[p.name] = jdesc
             sign = +1 if p.supplies else -1
-            members.append((p.effort, p.flow, -sign if m.startswith("-") else sign))
+            # a reversed member (terminals swapped) appears to the junction as (-e, -f): same power
+            flip = -1 if m.startswith("-") else 1
+            members.append((flip * p.effort, flip * p.flow, sign))
 
     for j in connections:
         ensure(j)

@@ -3,7 +3,9 @@
 A junction's members are port references (``"R0.p"``, or ``"R0"`` for a
 component with a single port), nested junctions, or names of other named
 junctions.  Members absorb power from the junction unless they are sources
-(ports that supply power) or prefixed with ``"-"`` (orientation reversed).
+(ports that supply power).  A ``"-"`` prefix reverses a member's polarity (its
+terminals swapped): the junction sees its effort and flow negated, which
+conserves power.
 A nested junction is joined to its parent by an internal bond along which
 power flows from the parent into the nested junction.
 """

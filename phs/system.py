@@ -301,12 +301,12 @@ class PHSystem:
     @cached_property
     def grad_H(self) -> sp.Matrix:
         """Gradient dH/dx as a column matrix."""
-        return sp.Matrix([sp.diff(self.H, xi) for xi in self.x])
+        return sp.Matrix(len(self.x), 1, [sp.diff(self.H, xi) for xi in self.x])
 
     @cached_property
     def dynamics(self) -> sp.Matrix:
         """Right-hand side x' as a column matrix."""
-        u = sp.Matrix(self.u) if self.inputs else sp.zeros(0, 1)
+        u = sp.Matrix(len(self.u), 1, self.u)
         return (self.J - self.R) * self.grad_H + (self.G - self.P) * u
 
     @cached_property
@@ -317,7 +317,7 @@ class PHSystem:
     @cached_property
     def port_output(self) -> sp.Matrix:
         """Power-conjugate outputs y."""
-        u = sp.Matrix(self.u) if self.inputs else sp.zeros(0, 1)
+        u = sp.Matrix(len(self.u), 1, self.u)
         return (self.G + self.P).T * self.grad_H + (self.S + self.N) * u
 
     @cached_property
@@ -344,10 +344,10 @@ class PHSystem:
 
         ``dHdt == supplied - dissipated`` holds identically.
         """
-        z = sp.Matrix(list(self.grad_H) + list(self.u))
-        dissipated = (z.T * self.dissipation_matrix * z)[0, 0]
-        supplied = (self.port_output.T * sp.Matrix(self.u))[0, 0] if self.inputs else sp.Integer(0)
-        dHdt = (self.grad_H.T * self.dynamics)[0, 0]
+        z = sp.Matrix(len(self.x) + len(self.u), 1, list(self.grad_H) + list(self.u))
+        dissipated = (z.T * self.dissipation_matrix * z)[0, 0] if len(z) else sp.Integer(0)
+        supplied = (self.port_output.T * sp.Matrix(len(self.u), 1, self.u))[0, 0] if self.inputs else sp.Integer(0)
+        dHdt = (self.grad_H.T * self.dynamics)[0, 0] if self.states else sp.Integer(0)
         return {"dHdt": dHdt, "dissipated": dissipated, "supplied": supplied}
 
     def dissipator_powers(self) -> dict[str, sp.Expr]:
