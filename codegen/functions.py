@@ -45,7 +45,7 @@ class GeneratedFunctions:
                 self.measured, self.conditions, self.dissipators, self.energy_terms]
 
 
-_CACHE: "weakref.WeakKeyDictionary[PHSystem, GeneratedFunctions]" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary[PHSystem, GeneratedFunctions] = weakref.WeakKeyDictionary()
 
 
 def generate(system: PHSystem) -> GeneratedFunctions:

@@ -5,6 +5,8 @@ Every component returns its port-Hamiltonian piece (:class:`phs.component.Piece`
 parameters ``{component}.{name}``; give a :class:`phs.Param` to share one.
 """
 
+from components.constraints import GeometricConstraint, Geometry, geometric_symbol
+from components.coupling import Gyrator, Transformer
 from components.electrical import (
     Capacitor,
     CurrentSource,
@@ -14,6 +16,7 @@ from components.electrical import (
     VariableCapacitor,
     VoltageSource,
 )
+from components.kinematics import ConfigurationInertia, KinematicChain
 from components.mechanical import (
     Damper,
     ForceSource,
@@ -26,9 +29,6 @@ from components.mechanical import (
     TorqueSource,
     TorsionalSpring,
 )
-from components.coupling import Gyrator, Transformer
-from components.constraints import GeometricConstraint, Geometry, geometric_symbol
-from components.kinematics import ConfigurationInertia, KinematicChain
 
 __all__ = [
     "Capacitor", "CurrentSource", "DriftBranch", "Inductor", "Resistor", "VariableCapacitor", "VoltageSource",

@@ -5,7 +5,9 @@ and scipy only.  Workflows that run models (simulation, identification,
 diagnosis, sweeps) are exposed lazily so ``import phs`` never imports casadi.
 """
 
+from phs import signals
 from phs.component import Component, symbol_of_input, symbol_of_output, symbol_of_state
+from phs.equilibria import EquilibriumResult, equilibrium
 from phs.errors import (
     DomainError,
     EquilibriumError,
@@ -17,13 +19,11 @@ from phs.errors import (
     SimulationError,
     UnitError,
 )
+from phs.interconnect import interconnect
 from phs.junctions import bond, feedback_link, parallel, series
 from phs.params import Condition, InputInfo, Measured, Param, StateInfo
-from phs.system import PHSystem
-from phs.interconnect import interconnect
 from phs.subsystem import feedback
-from phs.equilibria import EquilibriumResult, equilibrium
-from phs import signals
+from phs.system import PHSystem
 
 __version__ = "0.1.0"
 

@@ -15,7 +15,7 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import UnitError
-from phs.units import JOULE, DIMENSIONLESS, dimension, format_dim, parse_unit
+from phs.units import DIMENSIONLESS, JOULE, dimension, format_dim, parse_unit
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,8 @@ def latex(system) -> str:
         r"x &= " + L(x) + r"\\",
     ]
     if system.inputs:
-        parts.append(r"y &= " + L((system.G + system.P).T) + r"\nabla H + " + L(system.S + system.N) + r"\,u,\quad u = " + L(sp.Matrix(system.u)) + r"\\")
+        parts.append(r"y &= " + L((system.G + system.P).T) + r"\nabla H + " + L(system.S + system.N)
+                     + r"\,u,\quad u = " + L(sp.Matrix(system.u)) + r"\\")
     parts.append(r"H &= " + L(system.H))
     parts.append(r"\end{aligned}")
     return "$$" + "\n".join(parts) + "$$"

@@ -29,7 +29,6 @@ import scipy.linalg
 from phs.errors import EquilibriumError, InputDataError
 
 
-
 @dataclass(frozen=True)
 class EquilibriumResult:
     """An equilibrium: state and input vectors, the scaled residual and how it was found."""
@@ -180,7 +179,7 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
             sol = scipy.integrate.solve_ivp(ode, (0.0, 1.0), x_from[dep], rtol=1e-11, atol=1e-13 * s[dep],
                                             method="DOP853")
         except (np.linalg.LinAlgError, ValueError) as exc:
-            raise EquilibriumError(f"equilibrium of {system.name!r}: could not follow the conserved quantities: {exc}")
+            raise EquilibriumError(f"equilibrium of {system.name!r}: could not follow the conserved quantities: {exc}") from None
         if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
             raise EquilibriumError(f"equilibrium of {system.name!r}: could not follow the conserved quantities: {sol.message}")
         x[free] = xf_to

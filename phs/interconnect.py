@@ -113,7 +113,8 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
             continue
         old = params.get(p.name)
         if old is not None and old != p:
-            problems.append(f"parameter {p.name!r} is declared twice with different values/units ({old.value} {old.unit} vs {p.value} {p.unit})")
+            problems.append(f"parameter {p.name!r} is declared twice with different values/units "
+                            f"({old.value} {old.unit} vs {p.value} {p.unit})")
         params.setdefault(p.name, p)
     storages = [s for pc in pieces for s in pc.storages]
     state_owner: dict[str, str] = {}

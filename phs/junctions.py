@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from phs.errors import InterconnectionError
 
+
 @dataclass(frozen=True)
 class Junction:
     """A 0- or 1-junction; build it with :func:`series` or :func:`parallel`."""

@@ -178,7 +178,7 @@ class _Problem:
         self.N = N
         sim = Simulator(system, rtol=rtol, atol=atol)
         scale = sim.scale
-        nx, nu = len(system.states), len(system.inputs)
+        nu = len(system.inputs)
         grids = [t] * nu
         F, _layout = sim._integrator(N - 1, [[] for _ in range(nu)], grids)
         pnames = system.param_names
