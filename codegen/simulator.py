@@ -60,7 +60,7 @@ def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: 
 
 
 def simulator(system, rtol: float = 1e-8, atol: float | None = None, max_steps: int = 200000,
-              compile: bool = False) -> Simulator:
+              compile: bool = False, energy: bool = True) -> Simulator:
     """Build a reusable :class:`Simulator` (integrators are cached across runs).
 
     Examples
@@ -72,7 +72,7 @@ def simulator(system, rtol: float = 1e-8, atol: float | None = None, max_steps: 
     >>> res["position"].shape
     (11,)
     """
-    return Simulator(system, rtol=rtol, atol=atol, max_steps=max_steps, compile=compile)
+    return Simulator(system, rtol=rtol, atol=atol, max_steps=max_steps, compile=compile, energy=energy)
 
 
 class Simulator:
@@ -91,9 +91,12 @@ class Simulator:
     compile : bool
         Compile the model's dynamics to C (cached on disk by a hash of the model,
         see :mod:`codegen.compile`) instead of evaluating CasADi's SX virtual machine.
+    energy : bool
+        Integrate the energy accounts (supplied, dissipated in total and per element) as
+        quadratures of the same run (default); False skips them.
     """
 
-    def __init__(self, system, rtol=1e-8, atol=None, max_steps=200000, compile=False):
+    def __init__(self, system, rtol=1e-8, atol=None, max_steps=200000, compile=False, energy=True):
         self.system = system
         self.f = generate(system)
         if not (0 < rtol < 1) or (atol is not None and not atol > 0):
@@ -102,9 +105,11 @@ class Simulator:
         self.atol = float(atol) if atol is not None else self.rtol / 100
         self.max_steps = int(max_steps)
         self.compile = bool(compile)
+        self.energy = bool(energy)
         self.scale = np.array([s.typical for s in system.states], dtype=float)
         self._integrators: dict = {}
         self._templates: dict = {}
+        self._cond_maps: dict = {}
 
     # -- inputs ------------------------------------------------------------------------
     def _signals(self, u, t) -> list[Signal]:
@@ -218,7 +223,7 @@ class Simulator:
             [sx["xdot"], sx["supplied"], sx["dissipated"], sx["dissipators"]], subs_in, [x, uu, pp]
         )
         ode = h * xdot / self.scale
-        quad = h * ca.vertcat(supplied, dissipated, dparts)
+        quad = h * ca.vertcat(supplied, dissipated, dparts) if self.energy else ca.SX(0, 1)
         P = ca.vertcat(pp, a, h, *extra)
         empty = ca.SX(0, 1)
         dae = ca.Function(f"{self.f.rhs.name()}_dae", [tau, z, empty, P, empty], [ode, empty, quad, empty],
@@ -275,7 +280,7 @@ class Simulator:
         segs, slots = self._plan(sigs, t)
         sampled = [np.asarray(sg.times) if isinstance(sg, Sampled) else None for sg in sigs]
         sampled_vals = [np.asarray(sg.values) if isinstance(sg, Sampled) else None for sg in sigs]
-        nq = 2 + len(s.dissipators)
+        nq = 2 + len(s.dissipators) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))
         X[0] = x
@@ -326,9 +331,10 @@ class Simulator:
                 nrun += 1
         res = SimulationResult(s, t, X, U, p, stats={"runs": nrun, "seconds": _time.perf_counter() - wall,
                                                      "method": "cvodes", "rtol": self.rtol, "atol": self.atol})
-        res.quadratures = {"E_supplied": Q[:, 0], "E_dissipated": Q[:, 1]}
-        for k, (label, _) in enumerate(s.dissipators):
-            res.quadratures[f"E_dissipated[{label}]"] = Q[:, 2 + k]
+        if self.energy:
+            res.quadratures = {"E_supplied": Q[:, 0], "E_dissipated": Q[:, 1]}
+            for k, (label, _) in enumerate(s.dissipators):
+                res.quadratures[f"E_dissipated[{label}]"] = Q[:, 2 + k]
         return res
 
     def _static_result(self, t, sigs, segs, slots, p, wall) -> SimulationResult:
@@ -407,8 +413,20 @@ class Simulator:
         if not s.conditions:
             return
         n = len(times)
-        fm = self.f.conditions.map(n) if n > 1 else self.f.conditions
-        g = np.asarray(fm(xs.T, uu.T if uu.size else np.zeros((0, n)), np.repeat(p[:, None], n, axis=1))).reshape(-1, n)
+        fm = self._cond_maps.get(n)
+        if fm is None:
+            fm = self._cond_maps[n] = self.f.conditions.map(n)
+        buf, trigger = fm.buffer()
+        X = np.ascontiguousarray(xs, dtype=float)  # (n, nx) C-order = (nx, n) column-major
+        Uu = np.ascontiguousarray(uu, dtype=float)
+        Pp = np.ascontiguousarray(np.broadcast_to(p, (n, len(p))), dtype=float)
+        gT = np.empty((n, len(s.conditions)))
+        buf.set_arg(0, memoryview(X))
+        buf.set_arg(1, memoryview(Uu))
+        buf.set_arg(2, memoryview(Pp))
+        buf.set_res(0, memoryview(gT))
+        trigger()
+        g = gT.T
         bad = (g < -1e-12) | ~np.isfinite(g)
         if np.any(bad):
             k = int(np.argmax(np.any(bad, axis=0)))

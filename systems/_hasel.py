@@ -58,7 +58,10 @@ def shell(prefix: str, P, S, *, inertia: bool = True, theta_scale: float = 0.2, 
         RotationalDamper(f"{prefix}.b", b=P("b")),
         Transformer(f"{prefix}.d", 2 * A_s / lp, unit="m", domains=("rotational", "translational")),
         Geometry(f"{prefix}.shell", {f"{prefix}.A_s": Lv * c * sp.sin(alpha) / 4}, units={f"{prefix}.A_s": "m**2"},
-                 conditions=[("top film not shorter than the chord (arcsin argument <= 1)", lp - Lv * sp.sin(alpha))]),
+                 # l_p >= L_v cos(theta/2), to within the regularisation (the square root stays real down to
+                 # X = -eps**2, i.e. about eps**2 / (2 L_v) below the chord)
+                 conditions=[("top film not shorter than the chord (arcsin argument <= 1, within eps_geo)",
+                              lp - Lv * sp.sin(alpha) + S("eps_geo") ** 2 / (2 * Lv))]),
     ]
     mech = [f"{prefix}.Kb"] + ([f"{prefix}.I"] if inertia else []) + [f"{prefix}.b", f"{prefix}.d.a"]
     return comps, [mech, series(f"{prefix}.d.b", f"{prefix}.K")], A_s, th

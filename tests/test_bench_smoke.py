@@ -1,0 +1,26 @@
+"""Smoke test of bench/simulate_curling_hasel.py: the quick run completes and reports its figures."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "simulate_curling_hasel.py"
+KEYS = {"ratio_vs_bdf", "ratio_vs_lsoda", "codegen_seconds", "seconds_ours", "seconds_bdf", "seconds_lsoda",
+        "final_state_rel_diff"}
+
+
+def test_quick_benchmark_reports_json_and_final_states_agree():
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    figures = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert KEYS <= figures.keys(), sorted(KEYS - figures.keys())
+    assert figures["quick"] is True
+    assert figures["final_states_agree"] is True
+    assert 0 <= figures["final_state_rel_diff"] <= 1e-5
+    assert set(figures["codegen_seconds"]) == {"4", "8"}
+    assert all(v > 0 for v in figures["codegen_seconds"].values())
+    for key in ("ratio_vs_bdf", "ratio_vs_lsoda", "seconds_ours", "seconds_bdf", "seconds_lsoda"):
+        assert figures[key] > 0, key
