@@ -25,7 +25,15 @@ from phs.system import PHSystem
 
 @dataclass(frozen=True)
 class GeneratedFunctions:
-    """The generated functions of one system and the symbols they were built from."""
+    """The generated functions of one system and the symbols they were built from.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> f = generate(mass_spring_damper())
+    >>> [fn.name() for fn in f.all()][:3]
+    ['msd_rhs', 'msd_output', 'msd_hamiltonian']
+    """
 
     system: PHSystem
     rhs: ca.Function
@@ -63,7 +71,7 @@ def generate(system: PHSystem) -> GeneratedFunctions:
     hit = _CACHE.get(system)
     if hit is not None:
         return hit
-    name = c_identifier(system.name)
+    name = c_identifier(system.name).replace("__", "_")  # CasADi function names may not hold '__'
     nx, nu, npar = len(system.states), len(system.inputs), len(system.params)
     x = ca.SX.sym("x", nx)
     u = ca.SX.sym("u", nu)

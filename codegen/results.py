@@ -28,6 +28,15 @@ class SimulationResult:
         Inputs evaluated on the grid.
     p : array (np,)
         Parameter values used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from codegen import simulate
+    >>> from systems.examples import mass_spring_damper
+    >>> res = simulate(mass_spring_damper(), np.linspace(0, 2, 21), u={"F": 1.0})
+    >>> res.columns[:3], res["position"].shape
+    (['m.p', 'k.l', 'F'], (21,))
     """
 
     def __init__(self, system, t, x, u, p, stats: dict | None = None):

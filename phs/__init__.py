@@ -36,7 +36,17 @@ __all__ = [
 
 
 def load(path):
-    """Load a system saved with :meth:`PHSystem.save`."""
+    """Load a system saved with :meth:`PHSystem.save`.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from systems.examples import rc_circuit
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     rc_circuit().with_params({"R.R": 2e3}).save(os.path.join(d, "rc.json"))
+    ...     load(os.path.join(d, "rc.json")).param("R.R").value
+    2000.0
+    """
     return PHSystem.load(path)
 
 

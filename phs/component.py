@@ -159,6 +159,25 @@ class Component(ABC):
     ----------
     name : str
         Dotted name, unique in a model (``"seg2.C2"``).
+
+    Examples
+    --------
+    A one-port linear damper written as a custom component:
+
+    >>> from phs.component import Dissipator, Relation
+    >>> class MyDamper(Component):
+    ...     def __init__(self, name, b):
+    ...         super().__init__(name)
+    ...         self.b = b
+    ...     def piece(self):
+    ...         port = self._port("p", "translational")
+    ...         b, params = self._param("b", self.b, "N*s/m", "damping")
+    ...         return Piece(self.name, ports=(port,), relations=(Relation(port.effort - b * port.flow, self.name, "resistive"),),
+    ...                      dissipators=(Dissipator(self.name, (port,)),), params=params)
+    >>> from phs import interconnect, series
+    >>> from components import Mass
+    >>> interconnect("m", [Mass("m"), MyDamper("d", 0.3)], [series("m", "d")]).R
+    Matrix([[d.b]])
     """
 
     def __init__(self, name: str):
@@ -223,5 +242,11 @@ def symbol_of_output(name: str) -> sp.Symbol:
 
 
 def symbol_of_input(name: str) -> sp.Symbol:
-    """Symbol to use in measured outputs that refer to an input."""
+    """Symbol to use in measured outputs that refer to an input.
+
+    Examples
+    --------
+    >>> symbol_of_input("U")
+    U
+    """
     return input_symbol(check_name(name, "input"))

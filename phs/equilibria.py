@@ -31,7 +31,15 @@ from phs.errors import EquilibriumError, InputDataError
 
 @dataclass(frozen=True)
 class EquilibriumResult:
-    """An equilibrium: state and input vectors, the scaled residual and how it was found."""
+    """An equilibrium: state and input vectors, the scaled residual and how it was found.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> eq = equilibrium(mass_spring_damper(), u={"F": 2.0})
+    >>> round(eq["k.l"], 9), eq.conserved
+    (0.5, 0)
+    """
 
     system_name: str
     state_names: tuple

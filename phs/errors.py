@@ -37,35 +37,100 @@ class PHSError(Exception):
 
 
 class ModelError(PHSError, ValueError):
-    """A model (component, system, parameter) is malformed."""
+    """A model (component, system, parameter) is malformed.
+
+    Examples
+    --------
+    >>> issubclass(ModelError, PHSError) and issubclass(ModelError, ValueError)
+    True
+    """
 
 
 class InterconnectionError(ModelError):
-    """A connection is unrealizable: unconnected port, dependent storages, unknown name."""
+    """A connection is unrealizable: unconnected port, dependent storages, unknown name.
+
+    Examples
+    --------
+    >>> from phs import interconnect, parallel
+    >>> from components import Capacitor
+    >>> try:
+    ...     interconnect("x", [Capacitor("C1"), Capacitor("C2")], [parallel("C1", "C2")])
+    ... except InterconnectionError as err:
+    ...     print("C1.Q" in str(err) and "C2.Q" in str(err))
+    True
+    """
 
 
 class ParameterError(ModelError, KeyError):
-    """A parameter is unknown, has no value, or is outside its declared range."""
+    """A parameter is unknown, has no value, or is outside its declared range.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> try:
+    ...     rc_circuit().with_params({"nope": 1.0})
+    ... except ParameterError as err:
+    ...     print("nope" in str(err))
+    True
+    """
 
     def __str__(self) -> str:  # KeyError would quote the message
         return Exception.__str__(self)
 
 
 class UnitError(ModelError):
-    """Declared units are inconsistent (an energy term that is not in joules)."""
+    """Declared units are inconsistent (an energy term that is not in joules).
+
+    Examples
+    --------
+    >>> from phs.units import parse_unit
+    >>> try:
+    ...     parse_unit("furlong")
+    ... except UnitError as err:
+    ...     print(err)
+    unknown unit 'furlong' in 'furlong'
+    """
 
 
 class DomainError(PHSError, ArithmeticError):
-    """A state left the model's validity domain (for example an arcsin argument above 1)."""
+    """A state left the model's validity domain (for example an arcsin argument above 1).
+
+    Examples
+    --------
+    >>> issubclass(DomainError, PHSError)
+    True
+    """
 
 
 class SimulationError(PHSError, RuntimeError):
-    """The integrator failed, or the solution became non-finite."""
+    """The integrator failed, or the solution became non-finite.
+
+    Examples
+    --------
+    >>> str(SimulationError("the integrator failed at t=0.5"))
+    'the integrator failed at t=0.5'
+    """
 
 
 class InputDataError(PHSError, ValueError):
-    """An input signal, CSV file or command-line argument is malformed."""
+    """An input signal, CSV file or command-line argument is malformed.
+
+    Examples
+    --------
+    >>> from phs.signals import parse_expression
+    >>> try:
+    ...     parse_expression("sin(x)")
+    ... except InputDataError as err:
+    ...     print("'x'" in str(err))
+    True
+    """
 
 
 class EquilibriumError(PHSError, RuntimeError):
-    """No equilibrium could be found for the requested input or target."""
+    """No equilibrium could be found for the requested input or target.
+
+    Examples
+    --------
+    >>> issubclass(EquilibriumError, PHSError)
+    True
+    """

@@ -148,6 +148,11 @@ class StateInfo:
     ``kind`` is ``"C"`` for displacement-like states (charge, angle, length:
     the port flow is the state's rate) and ``"I"`` for momentum-like states
     (the port effort is the state's rate).
+
+    Examples
+    --------
+    >>> StateInfo("seg1.theta", "rad", (-0.4, 0.4), scale=0.2).typical
+    0.2
     """
 
     name: str
@@ -173,7 +178,13 @@ class StateInfo:
 
 @dataclass(frozen=True)
 class InputInfo:
-    """An input of a system and the name of its power-conjugate output."""
+    """An input of a system and the name of its power-conjugate output.
+
+    Examples
+    --------
+    >>> InputInfo("U", "V", output="U.i", output_unit="A").symbol
+    U
+    """
 
     name: str
     unit: str = "1"
@@ -190,7 +201,14 @@ class InputInfo:
 
 @dataclass(frozen=True)
 class Condition:
-    """A validity condition ``expr >= 0`` with a label naming where it comes from."""
+    """A validity condition ``expr >= 0`` with a label naming where it comes from.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> Condition("l_e <= L_e", 0.015 - sp.Symbol("l_e")).label
+    'l_e <= L_e'
+    """
 
     label: str
     expr: sp.Expr
@@ -207,7 +225,14 @@ class EnergyTerm:
 
 @dataclass(frozen=True)
 class Measured:
-    """A measured output: a named function of state and input (a sensor's reading)."""
+    """A measured output: a named function of state and input (a sensor's reading).
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> Measured("tip", 0.03 * sp.sin(sp.Symbol("theta", real=True)), "m").unit
+    'm'
+    """
 
     name: str
     expr: sp.Expr

@@ -152,7 +152,7 @@ def _pick(pw: sp.Piecewise, mid: float) -> sp.Expr:
 class Piecewise(Signal):
     """Values held between switching times: ``levels[k]`` on ``[times[k], times[k+1])``.
 
-    ``levels[0]`` also applies before ``times[0]``.
+    ``initial`` applies before ``times[0]`` (default ``levels[0]``).
 
     Examples
     --------
@@ -163,6 +163,7 @@ class Piecewise(Signal):
 
     times: tuple
     levels: tuple
+    initial: float | None = None
 
     def __post_init__(self):
         if len(self.times) != len(self.levels) or not self.times:
@@ -170,12 +171,16 @@ class Piecewise(Signal):
         if any(b <= a for a, b in zip(self.times, self.times[1:])):
             raise InputDataError("piecewise signal: switching times must be strictly increasing")
 
+    def _before(self) -> float:
+        return self.levels[0] if self.initial is None else self.initial
+
     def breakpoints(self, t0, t1):
-        return np.array([x for x in self.times if t0 < x < t1], dtype=float)
+        prev = [self._before()] + list(self.levels[:-1])
+        return np.array([x for x, a, b in zip(self.times, prev, self.levels) if t0 < x < t1 and a != b], dtype=float)
 
     def expr_on(self, a, b):
         k = int(np.searchsorted(np.asarray(self.times), (a + b) / 2, side="right")) - 1
-        return sp.Float(self.levels[max(k, 0)])
+        return sp.Float(self._before() if k < 0 else self.levels[k])
 
 
 @dataclass(frozen=True)
@@ -249,7 +254,7 @@ def step(amplitude: float, at: float = 0.0, before: float = 0.0) -> Signal:
     >>> float(step(5000.0, at=0.1)(0.2))
     5000.0
     """
-    return Piecewise((float(at) - 1.0, float(at)), (float(before), float(amplitude)))
+    return Piecewise((float(at),), (float(amplitude),), float(before))
 
 
 def square(amplitude: float, frequency: float, duty: float = 0.5, offset: float = 0.0, bipolar: bool = True,
@@ -279,7 +284,7 @@ def staircase(step_height: float, every: float, n_steps: int, start: float = 0.0
     """
     times = tuple(start + k * every for k in range(n_steps))
     levels = tuple(initial + (k + 1) * step_height for k in range(n_steps))
-    return Piecewise((start - every,) + times, (initial,) + levels)
+    return Piecewise(times, levels, float(initial))
 
 
 def sine(amplitude: float, frequency: float, phase: float = 0.0, offset: float = 0.0) -> Signal:
@@ -365,6 +370,9 @@ def as_signal(spec) -> Signal:
 
 
 _FUNCS = {"square": square, "step": step, "staircase": staircase, "sine": sine, "chirp": chirp}
+_MATH = {"sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "exp": sp.exp, "log": sp.log, "sqrt": sp.sqrt, "tanh": sp.tanh,
+         "sinh": sp.sinh, "cosh": sp.cosh, "abs": sp.Abs, "Abs": sp.Abs, "sign": sp.sign, "Heaviside": sp.Heaviside,
+         "atan": sp.atan, "asin": sp.asin, "acos": sp.acos}
 
 
 def parse_expression(text: str) -> Signal:
@@ -388,20 +396,36 @@ def parse_expression(text: str) -> Signal:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
         raise InputDataError(f"cannot read input expression {text!r}: {exc.msg}") from None
+    allowed_nodes = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Call, ast.Name, ast.Load, ast.Constant, ast.keyword,
+                     ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow, ast.USub, ast.UAdd, ast.Mod)
+    names = set(_FUNCS) | set(_MATH) | {"t", "pi"}
+    for n in ast.walk(tree):  # checked before anything is evaluated
+        if isinstance(n, ast.Attribute):
+            raise InputDataError(f"input expression {text!r}: attribute access is not allowed")
+        if not isinstance(n, allowed_nodes):
+            raise InputDataError(f"input expression {text!r}: {type(n).__name__} is not allowed")
+        if isinstance(n, ast.Name) and n.id not in names:
+            raise InputDataError(f"input expression {text!r}: unknown name {n.id!r} "
+                                 f"(allowed: t, pi, {', '.join(sorted(_MATH))}, {', '.join(_FUNCS)})")
+        if isinstance(n, ast.Constant) and not isinstance(n.value, (int, float)):
+            raise InputDataError(f"input expression {text!r}: only numbers are allowed as constants")
     calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUNCS]
     if not calls:
         try:
-            e = sp.sympify(text, locals={"t": TIME, "pi": sp.pi})
-        except (sp.SympifyError, SyntaxError, TypeError) as exc:
+            e = sp.sympify(text, locals={"t": TIME, "pi": sp.pi, **_MATH})
+        except (sp.SympifyError, SyntaxError, TypeError, ValueError) as exc:
             raise InputDataError(f"cannot read input expression {text!r}: {exc}") from None
+        if e.free_symbols - {TIME}:
+            raise InputDataError(f"input expression {text!r}: unknown symbols {sorted(map(str, e.free_symbols - {TIME}))}")
+        if not e.free_symbols and not sp.Float(e).is_finite:
+            raise InputDataError(f"input expression {text!r} is not a finite number")
         return as_signal(e)
     env = {k: v for k, v in _FUNCS.items()}
     env.update({"pi": math.pi, "__builtins__": {}})
     for n in ast.walk(tree):
         if isinstance(n, ast.Name) and n.id not in env:
-            raise InputDataError(f"input expression {text!r}: unknown name {n.id!r} (allowed: t, pi, {', '.join(_FUNCS)})")
-        if isinstance(n, ast.Attribute):
-            raise InputDataError(f"input expression {text!r}: attribute access is not allowed")
+            raise InputDataError(f"input expression {text!r}: {n.id!r} cannot be combined with "
+                                 f"{', '.join(_FUNCS)} (use numbers and those functions)")
     try:
         val = eval(compile(tree, "<input>", "eval"), env)  # names restricted above
     except (TypeError, ValueError, ZeroDivisionError, InputDataError) as exc:

@@ -451,9 +451,29 @@ class PHSystem:
         worst = _psd_samples(self, k=8, seed=0)
         if worst is not None and worst["min_eig"] < -1e-9 * max(1.0, worst["scale"]):
             problems.append(
-                f"R is not positive semidefinite: eigenvalue {worst['min_eig']:.3g} of [[R, P], [P^T, S]] at "
+                f"R is not positive semidefinite: eigenvalue {worst['min_eig']:.3g} of [[R, P], [P^T, S]] in the block of "
+                + ", ".join(worst["block"]) + self._psd_culprits(worst["block"]) + " at "
                 + ", ".join(f"{k}={v:.4g}" for k, v in worst["point"].items())
             )
+
+    def _psd_culprits(self, block_names) -> str:
+        """The resistive elements acting on a block, and their parameters with negative values."""
+        names = self.state_names + self.input_names
+        idx = {names.index(n) for n in block_names if n in names}
+        labels, negative = [], set()
+        for label, entries in self.dissipators:
+            touched = [v for (i, j), v in entries.items() if i in idx or j in idx]
+            if touched:
+                labels.append(label)
+                for v in touched:
+                    for sym in v.free_symbols:
+                        for q in self.params:
+                            if q.symbol == sym and q.value is not None and q.value < 0:
+                                negative.add(f"{q.name}={q.value:g}")
+        out = f" (resistive elements: {', '.join(labels)})" if labels else ""
+        if negative:
+            out += f"; negative parameter values: {', '.join(sorted(negative))}"
+        return out
 
     def check(self, samples: int = 200, seed: int = 0):
         """Structural report: skew J, PSD R (symbolic or sampled), H bounded below, units.
