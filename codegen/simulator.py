@@ -241,7 +241,8 @@ class Simulator:
             from codegen.compile import compiled
 
             dae = compiled(dae, f"{self.system.model_hash()}|{key[1:]}|{self.scale.tolist()}")
-        opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False}
+        opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
+                "disable_internal_warnings": True}  # failures are reported as PHS errors instead
         F = ca.integrator(f"{self.f.rhs.name()}_cvodes{n}", "cvodes", dae, 0.0, np.arange(1.0, n + 1.0), opts)
         self._integrators[key] = (F, layout)
         return F, layout

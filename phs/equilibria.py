@@ -81,7 +81,7 @@ def _vector(system, spec, names, what, default) -> np.ndarray:
 
 
 def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float = 1e-10,
-                max_nfev: int = 500, h0: float = 1e-6) -> EquilibriumResult:
+                max_nfev: int = 500, h0: float = 1e-6, stable: bool = True, _growth: float = 10.0) -> EquilibriumResult:
     """Equilibrium of ``system`` under the constant input ``u`` on the leaf through ``x0``.
 
     Parameters
@@ -100,6 +100,10 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
         Maximum number of pseudo-transient steps.
     h0 : float
         First pseudo-time step [s]; it grows as the residual falls.
+    stable : bool
+        Prefer a stable equilibrium: when the one found is unstable (an eigenvalue of the
+        linearisation on the leaf with positive real part), retry following the dynamics more
+        closely; ``info["stable"]`` reports the outcome.
     tol : float
         Required residual ``max_i |x'_i| / s_i`` relative to the largest scaled rate at ``x0``
         (``s_i`` are the states' typical magnitudes).
@@ -130,6 +134,15 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
     import sympy as sp
 
     A = system.lambdify(sp.Matrix.hstack(system.J - system.R, system.G - system.P))
+
+    fcond = system.lambdify([c.expr for c in system.conditions]) if system.conditions else None
+
+    def inside(x) -> bool:
+        if fcond is None:
+            return True
+        with np.errstate(all="ignore"):
+            g = np.asarray(fcond(x, uv, p), dtype=float).reshape(-1)
+        return bool(np.all(g >= -1e-12))
 
     def rate(x):
         with np.errstate(all="ignore"):
@@ -222,7 +235,8 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
     f = rate(x)
     if not np.all(np.isfinite(f)):
         raise EquilibriumError(f"equilibrium of {system.name!r}: the dynamics are not finite at the starting point")
-    nfev, h = 0, float(h0)
+    nfev, h, growth = 0, float(h0), float(_growth)
+    stalled = False
     norm = float(np.linalg.norm(f[free] / s[free]))
     for _ in range(max_nfev):
         if np.max(np.abs(f / s)) / rscale <= tol * 1e-2:
@@ -244,24 +258,41 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
                 continue
             nfev += 1
             ft = rate(xt)
-            nt = float(np.linalg.norm(ft[free] / s[free])) if np.all(np.isfinite(ft)) else np.inf
-            if nt == np.inf:
+            nt = float(np.linalg.norm(ft[free] / s[free])) if np.all(np.isfinite(ft)) and inside(xt) else np.inf
+            if nt == np.inf:  # non-finite or outside the validity domain: a smaller pseudo-time step
                 h /= 10
                 continue
             # switched evolution relaxation: backward Euler is stable for any h on stable dynamics,
             # so every finite step is kept and h grows as the residual falls
             x, f = xt, ft
-            h = min(h * min(max(norm / max(nt, 1e-300), 0.5), 10.0) * 1.5, 1e15)
+            h = min(h * min(max(norm / max(nt, 1e-300), 0.5), growth) * 1.5, 1e15)
             norm = nt
             accepted = True
             break
         if not accepted:
+            stalled = True
             break
     res = float(np.max(np.abs(rate(x) / s))) / rscale if len(x) else 0.0
+    if res <= tol and not inside(x):
+        bad = [c.label for c, g in zip(system.conditions, np.asarray(fcond(x, uv, p), dtype=float).reshape(-1)) if g < -1e-12]
+        raise EquilibriumError(f"the equilibrium of {system.name!r} found for u={dict(zip(system.input_names, map(float, uv)))} "
+                               f"lies outside the validity domain: {'; '.join(bad)}")
     if not np.isfinite(res) or res > tol:
         raise EquilibriumError(
             f"no equilibrium of {system.name!r} found for u={dict(zip(system.input_names, map(float, uv)))}: "
             f"scaled residual {res:.3g} > {tol:g} at " + ", ".join(f"{n}={v:.6g}" for n, v in zip(names, x))
-            + " (give a better starting point with guess=)"
+            + (" (the continuation could not go on without leaving the validity domain or the dynamics becoming "
+               "non-finite: no equilibrium is reachable from x0, e.g. beyond a pull-in or saturation)" if stalled
+               else " (none may exist, e.g. beyond a pull-in or a saturation; otherwise give a starting point with guess=)")
         )
-    return EquilibriumResult(system.name, tuple(names), x, uv, res, k, tuple(names[i] for i in dep), {"nfev": nfev})
+    Jl = on_leaf(jac_full(x), x)[free] / s[free][:, None]
+    ev = np.linalg.eigvals(Jl) if Jl.size else np.zeros(0)
+    is_stable = bool(np.all(ev.real <= 1e-9 * max(1.0, float(np.max(np.abs(ev))) if ev.size else 1.0)))
+    if stable and not is_stable and growth > 2.0:
+        try:
+            return equilibrium(system, u=u, x0=x0, params=params, guess=guess, tol=tol, max_nfev=4 * max_nfev, h0=h0,
+                               stable=True, _growth=1.3)
+        except EquilibriumError:
+            pass
+    return EquilibriumResult(system.name, tuple(names), x, uv, res, k, tuple(names[i] for i in dep),
+                             {"nfev": nfev, "stable": is_stable, "eigenvalues": ev})

@@ -1,7 +1,9 @@
 """Ready-made models built only from components and the public interconnection API."""
 
 from systems.curling_hasel import curling_hasel
+from systems.electrostatic_actuator import electrostatic_actuator
 from systems.examples import duffing_oscillator, mass_spring_damper, rc_circuit, rlc_circuit
 from systems.manta_ray_fin import manta_ray_fin
 
-__all__ = ["rc_circuit", "rlc_circuit", "mass_spring_damper", "duffing_oscillator", "curling_hasel", "manta_ray_fin"]
+__all__ = ["rc_circuit", "rlc_circuit", "mass_spring_damper", "duffing_oscillator", "curling_hasel", "manta_ray_fin",
+           "electrostatic_actuator"]

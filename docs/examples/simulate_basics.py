@@ -19,7 +19,7 @@ from phs import Param, equilibrium, interconnect, parallel, series  # noqa: E402
 from phs.signals import square  # noqa: E402
 
 QUICK = "--quick" in sys.argv
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "figures")
+OUT = os.environ.get("PHS_DOCS_OUT") or os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "figures")  # tests write elsewhere
 
 # %% One segment's electrical network of the curling HASEL paper (with a fixed electrode capacitance):
 # source -> R0 -> (C1 || R1) -> (C2 || R2)
