@@ -171,16 +171,16 @@ def evaluate_fit(system, recording, outputs, x0=None, params=None) -> dict:
 class _Problem:
     """The residual and its exact Jacobian as CasADi functions of the fit coordinates."""
 
-    def __init__(self, system, recording, free, log_scaled, outputs, weights, x0, estimate_x0, rtol, atol):
+    def __init__(self, system, recording, free, log_scaled, outputs, weights, x0, estimate_x0, rtol, atol,
+                 shooting: int = 1, defect_weight: float = 1e3):
         self.system = system
         t = recording.t
         N = len(t)
         self.N = N
         sim = Simulator(system, rtol=rtol, atol=atol)
         scale = sim.scale
-        nu = len(system.inputs)
+        nx, nu = len(system.states), len(system.inputs)
         grids = [t] * nu
-        F, _layout = sim._integrator(N - 1, [[] for _ in range(nu)], grids)
         pnames = system.param_names
         p0 = system.param_vector()
         self.nominal = np.array([p0[pnames.index(k)] for k in free])
@@ -199,9 +199,28 @@ class _Problem:
             i = system.state_names.index(name)
             x0v[i] = xi[j] * scale[i]
         U = np.column_stack([recording[u] for u in system.input_names]) if nu else np.zeros((N, 0))
-        P = ca.vertcat(pvec, ca.DM([t[0], t[1] - t[0]]), *[ca.DM(U[:, j]) for j in range(nu)])
-        out = F(x0=x0v / ca.DM(scale), p=P)
-        X = ca.horzcat(x0v, out["xf"] * ca.repmat(ca.DM(scale), 1, N - 1))
+        Ucols = [ca.DM(U[:, j]) for j in range(nu)]
+        # multiple shooting: K windows, each integrated from its own (scaled) initial state; the
+        # continuity defects enter the least squares with a large weight (quadratic penalty)
+        K = max(1, min(int(shooting), (N - 1) // 3))
+        edges = np.linspace(0, N - 1, K + 1).round().astype(int)
+        S = ca.MX.sym("s", nx, K - 1)
+        self.window_starts = edges[1:-1]
+        cols, defects = [x0v], []
+        start = x0v
+        for k in range(K):
+            i0, i1 = int(edges[k]), int(edges[k + 1])
+            F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids)
+            P = ca.vertcat(pvec, ca.DM([t[i0], t[1] - t[0]]), *Ucols)
+            xf = F(x0=start / ca.DM(scale), p=P)["xf"] * ca.repmat(ca.DM(scale), 1, i1 - i0)
+            if k < K - 1:
+                cols.append(xf[:, :-1])
+                defects.append(xf[:, -1] / ca.DM(scale) - S[:, k])
+                start = S[:, k] * ca.DM(scale)
+                cols.append(start)
+            else:
+                cols.append(xf)
+        X = ca.horzcat(*cols)
         gen = generate(system)
         fo = gen.output.map(N, "serial")
         y_all, meas_all = fo(X, ca.DM(U.T), ca.repmat(pvec, 1, N))
@@ -217,9 +236,17 @@ class _Problem:
         Ymeas = np.vstack([recording[ch] for ch in outputs])
         W = np.array([weights[ch] for ch in outputs])[:, None]
         r = ca.vec(((Yhat - ca.DM(Ymeas)) * ca.DM(np.repeat(W, N, axis=1))).T)
-        z = ca.vertcat(theta, xi)
-        self.res = ca.Function("residual", [z], [r])
-        self.jac = ca.Function("residual_jac", [z], [r, ca.jacobian(r, z)])
+        wdef = ca.MX.sym("w_defect")
+        if defects:
+            r = ca.vertcat(r, wdef * ca.vertcat(*defects))
+        self.n_outputs_residual = N * len(outputs)
+        z = ca.vertcat(theta, xi, ca.vec(S))
+        self._jac = ca.Function("residual_jac", [z, wdef], [r, ca.jacobian(r, z)])
+        self.defect_weight = defect_weight
+        self.n_theta = len(free)
+
+    def jac(self, z):
+        return self._jac(z, self.defect_weight)
         self.n_theta = len(free)
 
     def values(self, z, log_scaled, free):
@@ -229,7 +256,7 @@ class _Problem:
 
 def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, weights=None, log_scale=None,
              estimate_x0=(), validation=None, initial=None, rtol: float = 1e-8, atol: float | None = None,
-             max_iter: int = 100, ftol: float = 1e-8, progress: bool = False) -> IdentificationResult:
+             max_iter: int = 100, ftol: float = 1e-8, shooting: int = 1, progress: bool = False) -> IdentificationResult:
     """Fit parameters ``free`` of ``system`` to ``recording`` by output error.
 
     Parameters
@@ -256,6 +283,11 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         Scored with the fitted model.
     initial : dict, optional
         Starting values (default: the system's current values).
+    shooting : int
+        Number of multiple-shooting windows (1: single shooting).  Each window starts from its own
+        state, estimated with the parameters; continuity between windows enters the least squares
+        as heavily weighted defects.  Helps oscillatory or drifting systems whose single-shooting
+        cost has many local minima.
     max_iter : int
         Maximum number of residual evaluations.
     ftol : float
@@ -312,7 +344,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     w.update(dict(weights or {}))
     sim = Simulator(system, rtol=rtol, atol=atol)
     x0v = sim.initial_state(x0)
-    prob = _Problem(system, recording, free, log_scaled, outs, w, x0v, list(estimate_x0), rtol, atol)
+    prob = _Problem(system, recording, free, log_scaled, outs, w, x0v, list(estimate_x0), rtol, atol, shooting=shooting)
     # bounds in fit coordinates
     lo, hi = [], []
     bounds = dict(bounds or {})
@@ -336,9 +368,16 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         st = system.states[i]
         lo.append(st.range[0] / scale[i])
         hi.append(st.range[1] / scale[i])
-    z0 = np.array([0.0 if k in log_scaled else 1.0 for k in free]
-                  + [x0v[system.state_names.index(n)] / scale[system.state_names.index(n)] for n in estimate_x0])
-    z0 = np.clip(z0, np.array(lo) + 1e-12, np.array(hi) - 1e-12)
+    z0 = [0.0 if k in log_scaled else 1.0 for k in free]
+    z0 += [x0v[system.state_names.index(n)] / scale[system.state_names.index(n)] for n in estimate_x0]
+    if len(prob.window_starts):
+        # window states start on the trajectory of the initial parameters
+        u_sig = {n: Sampled(tuple(recording.t), tuple(recording[n])) for n in system.input_names}
+        xs = simulate(system, recording.t, u=u_sig, x0=x0v).x[prob.window_starts] / scale
+        z0 += list(xs.reshape(-1))  # column-major vec of (nx, K-1): window by window
+        lo += [-np.inf] * xs.size  # declared ranges guide checks and sampling; they do not bound trajectories
+        hi += [np.inf] * xs.size
+    z0 = np.clip(np.array(z0), np.array(lo) + 1e-12, np.array(hi) - 1e-12)
     it = [0]
     last = {}
 
@@ -361,12 +400,20 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         fun(z)
         return last["J"]
 
-    sol = scipy.optimize.least_squares(fun, z0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                                       ftol=ftol, xtol=1e-10, gtol=1e-10, max_nfev=max_iter)
-    z = sol.x
+    # multiple shooting: continuation on the defect weight, from loose (windows fit the data
+    # almost freely) to tight (one continuous trajectory)
+    stages = [1.0, 10.0, 100.0, 1e3] if len(prob.window_starts) else [None]
+    z, nfev = z0, 0
+    for wd in stages:
+        if wd is not None:
+            prob.defect_weight = wd
+            last.clear()
+        sol = scipy.optimize.least_squares(fun, z, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                                           ftol=ftol, xtol=1e-10, gtol=1e-10, max_nfev=max_iter)
+        z, nfev = sol.x, nfev + sol.nfev
     r, J = prob.jac(z)
-    r = np.asarray(r).reshape(-1)
-    J = np.asarray(J)
+    r = np.asarray(r).reshape(-1)[: prob.n_outputs_residual]
+    J = np.asarray(J)[: prob.n_outputs_residual]
     n_res, n_par = len(r), len(z)
     sigma2 = float(r @ r) / max(n_res - n_par, 1)
     try:
@@ -399,7 +446,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         system=system, free=free, values=values, initial={k: float(system.param(k).value) for k in free},
         std_errors=std, intervals=ci, correlation=corr, flagged_pairs=flagged, fit_percent=fits,
         validation_fit_percent={}, residuals={ch: recording[ch] - sims[ch] for ch in outs}, cost=float(sol.cost),
-        iterations=int(sol.nfev), seconds=_time.perf_counter() - wall, x0=x0_fit, outputs=outs, weights=w,
+        iterations=int(nfev), seconds=_time.perf_counter() - wall, x0=x0_fit, outputs=outs, weights=w,
         log_scaled=log_scaled, message=str(sol.message), _recording=recording,
     )
     if validation is not None:
