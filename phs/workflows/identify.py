@@ -247,7 +247,6 @@ class _Problem:
 
     def jac(self, z):
         return self._jac(z, self.defect_weight)
-        self.n_theta = len(free)
 
     def values(self, z, log_scaled, free):
         th = z[: self.n_theta]
