@@ -21,7 +21,29 @@ from components import (
     VariableCapacitor,
     geometric_symbol,
 )
-from phs import parallel, series, symbol_of_state
+from phs import Param, parallel, series, symbol_of_state
+
+
+def pouch_parameters(L_e: float) -> list[Param]:
+    """Geometry and material of a HASEL pouch shared by the curling actuator and the fin
+    (Tables 3 and 6 of the curling HASEL paper) and the rest-point regularisation length.
+
+    Examples
+    --------
+    >>> [p.name for p in pouch_parameters(0.015)][:3]
+    ['L_p', 'L_v', 'L_e']
+    """
+    return [
+        Param("L_p", 0.015, "m", "rest length of the top film", (0.01, 0.02)),
+        Param("L_v", 0.015, "m", "length of the bottom film", (0.01, 0.02)),
+        Param("L_e", L_e, "m", "length of the electrodes (chamber)", (L_e * 2 / 3, L_e * 4 / 3)),
+        Param("X_h", 0.002, "m", "chamber height", (0.001, 0.004)),
+        Param("eps_r", 2.2, "1", "relative permittivity of the dielectric", (1.5, 3.5)),
+        Param("eps0", 8.854e-12, "F/m", "vacuum permittivity", (8.85e-12, 8.86e-12)),
+        Param("w", 0.05, "m", "actuator width", (0.03, 0.08)),
+        Param("t_f", 18e-6, "m", "film thickness", (10e-6, 30e-6)),
+        Param("eps_geo", 1.5e-5, "m", "regularisation length of the shell triangle at rest", (1e-7, 1e-4)),
+    ]
 
 
 def shell(prefix: str, P, S, *, inertia: bool = True, theta_scale: float = 0.2, l_scale: float = 0.015):

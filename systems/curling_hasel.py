@@ -55,7 +55,7 @@ import sympy as sp
 from components import Gravity, VoltageSource
 from phs import Measured, Param, interconnect, parallel, series, symbol_of_output, symbol_of_state
 from phs.errors import ModelError
-from systems._hasel import electrode_branch, shell
+from systems._hasel import electrode_branch, pouch_parameters, shell
 
 
 def default_parameters() -> dict[str, Param]:
@@ -66,16 +66,8 @@ def default_parameters() -> dict[str, Param]:
     >>> default_parameters()["K_b"].value
     0.04
     """
-    P = [
-        Param("L_p", 0.015, "m", "rest length of the top film", (0.01, 0.02)),
-        Param("L_v", 0.015, "m", "length of the bottom film", (0.01, 0.02)),
-        Param("L_e", 0.015, "m", "length of the electrodes (chamber)", (0.01, 0.02)),
-        Param("X_h", 0.002, "m", "chamber height", (0.001, 0.004)),
+    P = pouch_parameters(L_e=0.015) + [
         Param("m", 0.007, "kg", "mass of one segment", (0.003, 0.015)),
-        Param("eps_r", 2.2, "1", "relative permittivity of the dielectric", (1.5, 3.5)),
-        Param("eps0", 8.854e-12, "F/m", "vacuum permittivity", (8.85e-12, 8.86e-12)),
-        Param("w", 0.05, "m", "actuator width", (0.03, 0.08)),
-        Param("t_f", 18e-6, "m", "film thickness", (10e-6, 30e-6)),
         Param("R0", 1e3, "Ohm", "connector resistance (per segment branch)", (1e2, 1e5)),
         Param("R1", 1e6, "Ohm", "resistance of the charge-retention branch", (1e5, 1e7)),
         Param("R2", 1.47e6, "Ohm", "leakage resistance across the electrodes", (1e5, 1e7)),
@@ -87,7 +79,6 @@ def default_parameters() -> dict[str, Param]:
         Param("gamma2", 7.05, "1", "input-map angular frequency", (4.0, 10.0)),
         Param("g", 9.81, "m/s**2", "gravitational acceleration", (9.7, 9.9)),
         Param("I_s", 1.75e-5, "kg*m**2", "effective rotational inertia of one segment (eq. 15)", (1e-6, 1e-4)),
-        Param("eps_geo", 1.5e-5, "m", "regularisation length of the shell triangle at rest", (1e-7, 1e-4)),
     ]
     return {p.name: p for p in P}
 

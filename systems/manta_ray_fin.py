@@ -36,7 +36,7 @@ import sympy as sp
 from components import VoltageSource
 from phs import Measured, Param, interconnect, series, symbol_of_output
 from phs.errors import ModelError
-from systems._hasel import electrode_branch, shell
+from systems._hasel import electrode_branch, pouch_parameters, shell
 
 
 def default_parameters(n_shells: int = 4) -> dict[str, Param]:
@@ -47,16 +47,8 @@ def default_parameters(n_shells: int = 4) -> dict[str, Param]:
     >>> default_parameters()["K_b"].value
     0.2616
     """
-    P = [
-        Param("L_p", 0.015, "m", "rest length of the top film", (0.01, 0.02)),
-        Param("L_v", 0.015, "m", "length of the bottom film", (0.01, 0.02)),
-        Param("L_e", 0.05, "m", "length of the electrodes (chamber)", (0.03, 0.07)),
-        Param("X_h", 0.002, "m", "chamber height", (0.001, 0.004)),
+    P = pouch_parameters(L_e=0.05) + [
         Param("m", 0.018, "kg", "total mass of the fin", (0.01, 0.03)),
-        Param("eps_r", 2.2, "1", "relative permittivity of the dielectric", (1.5, 3.5)),
-        Param("eps0", 8.854e-12, "F/m", "vacuum permittivity", (8.85e-12, 8.86e-12)),
-        Param("w", 0.05, "m", "actuator width", (0.03, 0.08)),
-        Param("t_f", 18e-6, "m", "film thickness", (10e-6, 30e-6)),
         Param("R0", 1e3, "Ohm", "connector resistance", (1e2, 1e5)),
         Param("R1", 1.18e5, "Ohm", "resistance of the charge-retention branch", (1e4, 1e6)),
         Param("R2", 1.55e6, "Ohm", "leakage resistance across the electrodes", (1e5, 1e7)),
@@ -68,7 +60,6 @@ def default_parameters(n_shells: int = 4) -> dict[str, Param]:
         Param("gamma2", 8.9, "1", "input-map angular frequency", (5.0, 12.0)),
         Param("I_s", 0.015 * 0.018 / n_shells / 12, "kg*m**2", "effective rotational inertia of one shell",
               (1e-7, 1e-4)),
-        Param("eps_geo", 1.5e-5, "m", "regularisation length of the shell triangle at rest", (1e-7, 1e-4)),
     ]
     return {p.name: p for p in P}
 

@@ -144,14 +144,34 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     if len(rows) < 2:
         raise InputDataError(f"{path}: needs at least 2 data rows, found {len(rows)}")
     t = _column(path, header, rows, time_column)
+    check_time(t, path, 2, lambda k: f"row {rows[k][0]}", time_column)
+    signals = {u: Sampled(tuple(t), tuple(_column(path, header, rows, c))) for u, c in wanted.items()}
+    return t, signals
+
+
+def check_time(t, source: str, min_samples: int, where, column: str = "t") -> None:
+    """Raise InputDataError unless ``t`` has enough finite, strictly increasing samples.
+
+    ``where(k)`` names sample ``k`` in messages (``"row 4"`` for a file, ``"sample 3"`` for arrays).
+
+    Examples
+    --------
+    >>> check_time(np.array([0.0, 0.1, 0.1]), "u.csv", 2, lambda k: f"row {k + 2}")
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: u.csv: time column 't' is not strictly increasing at row 4 (t=0.1 after t=0.1: duplicated time)
+    """
+    if t.size < min_samples:
+        raise InputDataError(f"{source}: needs at least {min_samples} samples, found {t.size}")
+    bad = ~np.isfinite(t)
+    if np.any(bad):
+        raise InputDataError(f"{source}: time column {column!r} is not finite at {where(int(np.argmax(bad)))}")
     d = np.diff(t)
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0)) + 1
         kind = "duplicated" if d[k - 1] == 0 else "decreasing"
-        raise InputDataError(f"{path}: time column {time_column!r} is not strictly increasing: row {rows[k][0]} has "
-                             f"t={t[k]:g} after t={t[k - 1]:g} in row {rows[k - 1][0]} ({kind} time)")
-    signals = {u: Sampled(tuple(t), tuple(_column(path, header, rows, c))) for u, c in wanted.items()}
-    return t, signals
+        raise InputDataError(f"{source}: time column {column!r} is not strictly increasing at {where(k)} "
+                             f"(t={t[k]:g} after t={t[k - 1]:g}: {kind} time)")
 
 
 def _input_of(wanted: dict, column: str) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 
 from phs.errors import InputDataError
 from phs.units import parse_unit
-from phs.workflows.inputs import _column, _read_rows
+from phs.workflows.inputs import _column, _read_rows, check_time
 
 # SI multipliers of the unit names a recording may use (dimensions are checked separately)
 _PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1e-9, "c": 1e-2}
@@ -113,7 +113,7 @@ class Recording:
                 k = int(np.argmax(bad))
                 raise InputDataError(f"{source}: signal {name!r} is not finite at sample {k} (t={t[k]:g})")
             out[name] = v
-        _check_time(t, source, min_samples, lambda k: f"sample {k}")
+        check_time(t, source, min_samples, lambda k: f"sample {k}")
         rec = cls(t, out, source, dict(units or {}))
         return rec._resampled(resample) if resample else rec._checked_uniform()
 
@@ -174,7 +174,7 @@ class Recording:
         if len(rows) < min_samples:
             raise InputDataError(f"{path}: needs at least {min_samples} data rows, found {len(rows)}")
         t = _column(path, header, rows, time_column)
-        _check_time(t, path, min_samples, lambda k: f"row {rows[k][0]}")
+        check_time(t, path, min_samples, lambda k: f"row {rows[k][0]}", time_column)
         scales = dict(scales or {})
         signals = {}
         for c in wanted:
@@ -278,16 +278,3 @@ class Recording:
                                  f"{system.name!r} ({', '.join(system.measured_names)})")
         return system.input_names, outs
 
-
-def _check_time(t, source, min_samples, where) -> None:
-    if t.size < min_samples:
-        raise InputDataError(f"{source}: needs at least {min_samples} samples, found {t.size}")
-    bad = ~np.isfinite(t)
-    if np.any(bad):
-        raise InputDataError(f"{source}: time is not finite at {where(int(np.argmax(bad)))}")
-    d = np.diff(t)
-    if np.any(d <= 0):
-        k = int(np.argmax(d <= 0)) + 1
-        kind = "duplicated" if d[k - 1] == 0 else "decreasing"
-        raise InputDataError(f"{source}: time is not strictly increasing at {where(k)} (t={t[k]:g} after "
-                             f"t={t[k - 1]:g}: {kind} time)")
