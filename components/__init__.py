@@ -24,6 +24,7 @@ from components.mechanical import (
     LinearSpring,
     Mass,
     NonlinearSpring,
+    Potential,
     RotationalDamper,
     RotationalInertia,
     TorqueSource,
@@ -33,7 +34,7 @@ from components.mechanical import (
 __all__ = [
     "Capacitor", "CurrentSource", "DriftBranch", "Inductor", "Resistor", "VariableCapacitor", "VoltageSource",
     "Damper", "ForceSource", "Gravity", "LinearSpring", "Mass", "NonlinearSpring", "RotationalDamper",
-    "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
+    "Potential", "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
     "GeometricConstraint", "Geometry", "geometric_symbol",
     "ConfigurationInertia", "KinematicChain",
 ]

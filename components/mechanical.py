@@ -7,6 +7,8 @@ port effort is the rate), displacement states are "C" kind.
 
 from __future__ import annotations
 
+import functools
+
 import sympy as sp
 
 from components._base import QuadraticStorage, linear_resistor_piece, require_positive, source_piece
@@ -197,16 +199,25 @@ class NonlinearSpring(QuadraticStorage):
         return (-0.1, 0.1)
 
     def energy(self, x):
-        s = sp.Dummy("s", real=True)
-        e = sp.integrate(self.force.subs(self.variable, s), (s, 0, x))
+        e = _antiderivative(self.force, self.variable).xreplace({_UPPER: x})
         if e.has(sp.Integral):
             raise ModelError(f"component {self.name!r}: cannot integrate the force law {self.force} in closed form; "
-                             "give the energy directly with a custom component")
-        return sp.simplify(e)
+                             "give the energy with a Potential component instead")
+        return e
 
     def piece(self) -> Piece:
         pc = super().piece()
         return Piece(pc.name, storages=pc.storages, energy=pc.energy, ports=pc.ports, params=self.extra)
+
+
+_UPPER = sp.Symbol("_upper", real=True)
+
+
+@functools.lru_cache(maxsize=256)
+def _antiderivative(force: sp.Expr, variable: sp.Symbol) -> sp.Expr:
+    """int_0^_upper force d(variable), computed once per force law (sympy integration is slow)."""
+    s = sp.Dummy("s", real=True)
+    return sp.simplify(sp.integrate(force.subs(variable, s), (s, 0, _UPPER)))
 
 
 class Damper(Component):
@@ -242,6 +253,40 @@ class RotationalDamper(Damper):
 
     domain = "rotational"
     unit = "N*m*s/rad"
+
+
+class Potential(Component):
+    """A stateless energy term ``H = energy(x)`` of other components' states (no port).
+
+    Its force appears in dH/dx of the states the energy depends on (a conservative
+    field: the zero-voltage part of an actuator's force law, a restoring torque of a
+    joint).  :class:`Gravity` is the special case ``m g h(x)``.
+
+    Parameters
+    ----------
+    name : str
+    energy : sympy expression
+        Energy [J] in terms of states (:func:`phs.symbol_of_state`) and parameters.
+    params : sequence of Param
+        Parameters used in ``energy``.
+
+    Examples
+    --------
+    >>> from phs.component import symbol_of_state
+    >>> th = symbol_of_state("theta")
+    >>> Potential("tilt", 0.5 * th**2).piece().energy[0].expr
+    0.5*theta**2
+    """
+
+    def __init__(self, name: str, energy, params=()):
+        super().__init__(name)
+        self.energy, self.params = sp.sympify(energy), tuple(params)
+        for p in self.params:
+            if not isinstance(p, Param):
+                raise ModelError(f"component {name!r}: {p!r} in params is not a Param")
+
+    def piece(self) -> Piece:
+        return Piece(self.name, energy=(EnergyTerm(self.name, self.energy),), params=self.params)
 
 
 class Gravity(Component):
@@ -312,4 +357,4 @@ class TorqueSource(ForceSource):
 
 
 __all__ = ["Mass", "RotationalInertia", "LinearSpring", "TorsionalSpring", "NonlinearSpring", "Damper",
-           "RotationalDamper", "Gravity", "ForceSource", "TorqueSource", "Param"]
+           "RotationalDamper", "Gravity", "Potential", "ForceSource", "TorqueSource", "Param"]

@@ -94,6 +94,7 @@ CONSTRUCTORS = {
     "Damper": lambda **kw: components.Damper("b", b=1.0, **kw),
     "RotationalDamper": lambda **kw: components.RotationalDamper("b", b=1.0, **kw),
     "Gravity": lambda **kw: components.Gravity("g", height=sp.cos(th), **kw),
+    "Potential": lambda **kw: components.Potential("pot", sp.cos(th), **kw),
     "ForceSource": lambda **kw: components.ForceSource("F", **kw),
     "TorqueSource": lambda **kw: components.TorqueSource("T", **kw),
     "Transformer": lambda **kw: components.Transformer("tf", 2.0, **kw),

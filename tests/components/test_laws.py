@@ -43,6 +43,7 @@ from components import (
     LinearSpring,
     Mass,
     NonlinearSpring,
+    Potential,
     Resistor,
     RotationalDamper,
     RotationalInertia,
@@ -154,6 +155,15 @@ def _gravity():
                  [series("T", "J", "kb", "b")], params=[Lp])
 
 
+def _potential():
+    """A stateless quartic potential on a torsional spring's angle (a hardening joint)."""
+    th = symbol_of_state("kb.theta")
+    k4 = Param("k4", 0.5, "N*m/rad", "quartic stiffness")
+    return _spec("quartic", [TorqueSource("T"), RotationalInertia("J", I=1e-3), TorsionalSpring("kb", K=0.01),
+                             RotationalDamper("b", b=1e-3), Potential("hard", k4.symbol * th**4 / 4, params=[k4])],
+                 [series("T", "J", "kb", "b")], params=[k4])
+
+
 def _transformer():
     """Lever whose ratio depends on the lever's own spring length (a modulated transformer)."""
     n0 = Param("n0", 2.0, "1", "nominal lever ratio")
@@ -242,6 +252,7 @@ CASES = {
     "RotationalDamper": _rotational,
     "TorqueSource": _rotational,
     "Gravity": _gravity,
+    "Potential": _potential,
     "Transformer": _transformer,
     "Transformer(bond)": _bonded_transformer_chain,
     "Gyrator": _gyrator,
