@@ -76,7 +76,7 @@ Deviations and choices (each discussed in ``docs/systems/msd_hasel.md``):
 * The paper's actuator dynamics (eq. 6) have no inertia of their own: the moving mass
   is the carried platform (Fig. 2's two point masses are the attachment points).
 * The conservative part ``F_0`` of eq. 10 has no storage of its own; it is the energy
-  term of a stateless component (see :class:`_Potential`), not part of the material
+  term of a stateless component (:class:`components.Potential`), not part of the material
   spring, so that the material spring is exactly eq. 8.
 
 The platform (:func:`hasel_platform`) is described in its docstring.
