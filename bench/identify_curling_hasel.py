@@ -207,6 +207,7 @@ class _Baseline:
             z, capped, message, nfev, njev = self.best[1], True, "stopped by the budget", -1, -1
             if z is None:
                 z = z0
+        self.fit_sims = self.sims
         return z, time.perf_counter() - wall, time.process_time() - cpu, capped, message, nfev, njev
 
 
@@ -284,7 +285,7 @@ def main(argv=None) -> int:
     print(f"{'ours (identify, CVODES sens.)':<34}{seconds:>10.2f}{cpu_ours:>10.2f}{cost:>16.6g}{cost_l:>15.6g}"
           f"  {fit.iterations} residual+Jacobian")
     print(f"{'baseline (least_squares 2-point)':<34}{b_seconds:>10.2f}{b_cpu:>10.2f}{b_cost:>16.6g}{b_cost_l:>15.6g}"
-          f"  {base.sims} LSODA simulations" + (" (CAPPED)" if capped else ""))
+          f"  {base.fit_sims} LSODA simulations" + (" (CAPPED)" if capped else ""))
     print(f"cost at the true parameters (CVODES): {true_cost:.6g}")
     print(f"ratio baseline / ours: wall {bound}{ratio:.1f}x, CPU {bound}{ratio_cpu:.1f}x"
           + (f"  -- the baseline was stopped by its cap ({budget:g} s / {max_sims} simulations), so these are "
@@ -317,7 +318,7 @@ def main(argv=None) -> int:
         "cost_reported_by_identify": fit.cost,
         "true_parameters_cost": true_cost,
         "baseline_capped": capped,
-        "baseline_simulations": base.sims,
+        "baseline_simulations": base.fit_sims,
         "baseline_message": b_message,
         "iterations": fit.iterations,
         "values": fit.values,

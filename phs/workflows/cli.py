@@ -186,6 +186,309 @@ def _summary(args: argparse.Namespace, res, runtime: float) -> dict:
     }
 
 
+# -- fit ---------------------------------------------------------------------------------------------
+def _add_fit(sub) -> None:
+    p = sub.add_parser(
+        "fit", help="fit parameters of a model to a recording (output error)",
+        description="Fit the --free parameters of MODEL to the recording DATA (CSV) by output error, print the "
+                    "fitted values with confidence intervals and the NRMSE fit % per channel, and write a JSON "
+                    "summary (--json) and a report directory (--report: fit.png, sensitivity.md, summary.txt).")
+    _add_model_options(p)
+    p.add_argument("data", metavar="DATA", help="CSV recording: a time column, the model's inputs and measured outputs")
+    p.add_argument("--free", required=True, metavar="NAME,NAME", help="parameters to fit (comma-separated)")
+    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
+    p.add_argument("--scale", action="append", default=[], metavar="COLUMN=FROM:TO",
+                   help="convert a column's unit (pos=mm:m, volt=kV:V) or multiply it by a factor (COLUMN=FACTOR)")
+    p.add_argument("--resample", type=_positive("--resample"), metavar="DT",
+                   help="resample the recordings onto a uniform grid of step DT [s] (linear interpolation)")
+    p.add_argument("--outputs", metavar="NAME,NAME",
+                   help="measured outputs to fit (default: every one the recording provides)")
+    p.add_argument("--validate", metavar="DATA2", help="second CSV recording scored with the fitted model")
+    p.add_argument("--report", metavar="DIR", help="write DIR/fit.png, DIR/sensitivity.md and DIR/summary.txt")
+    p.add_argument("--max-iter", type=_positive_int("--max-iter"), default=100, metavar="N",
+                   help="maximum number of residual evaluations (default 100)")
+    p.add_argument("--quiet", action="store_true", help="do not print the optimiser's progress on stderr")
+    p.set_defaults(run=run_fit)
+
+
+def _positive_int(option: str):
+    def convert(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} must be a positive integer, got {text!r}") from None
+        if v < 1:
+            raise argparse.ArgumentTypeError(f"{option} must be a positive integer, got {text!r}")
+        return v
+
+    return convert
+
+
+def _name_list(text: str | None, option: str) -> list[str]:
+    """``"a, b,c"`` -> ``["a", "b", "c"]``; empty items and repeats are errors naming the option."""
+    if text is None:
+        return []
+    names = [n.strip() for n in text.split(",")]
+    if not any(names) or "" in names:
+        raise InputDataError(f"{option} {text!r}: expected NAME,NAME,... without empty names")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputDataError(f"{option}: {dup[0]!r} is given twice")
+    return names
+
+
+def parse_scales(items) -> dict:
+    """Parse ``--scale COLUMN=FROM:TO`` (unit conversion) or ``COLUMN=FACTOR`` values.
+
+    Raises
+    ------
+    InputDataError
+        Naming the option and the column: malformed item, unknown unit, units of different
+        dimensions, a factor that is not a finite non-zero number.
+
+    Examples
+    --------
+    >>> parse_scales(["pos=mm:m", "volt=kV:V", "i=0.5"])
+    {'pos': ('mm', 'm'), 'volt': ('kV', 'V'), 'i': 0.5}
+    >>> parse_scales(["pos=mm:V"])
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: --scale pos=mm:V: cannot convert 'mm' to 'V': different dimensions
+    """
+    from phs.workflows.recording import unit_factor
+
+    out: dict = {}
+    for column, value in parse_assignments(items, "--scale").items():
+        if ":" in value:
+            src, _, dst = value.partition(":")
+            src, dst = src.strip(), dst.strip()
+            if not src or not dst:
+                raise InputDataError(f"--scale {column}={value}: expected FROM:TO units such as mm:m")
+            try:
+                unit_factor(src, dst)
+            except InputDataError as exc:
+                raise InputDataError(f"--scale {column}={value}: {exc}") from None
+            out[column] = (src, dst)
+            continue
+        try:
+            factor = float(value)
+        except ValueError:
+            raise InputDataError(f"--scale {column}={value}: expected FROM:TO units (mm:m) or a number") from None
+        if not (math.isfinite(factor) and factor != 0):
+            raise InputDataError(f"--scale {column}={value}: the factor must be a finite non-zero number")
+        out[column] = factor
+    return out
+
+
+def _csv_header(path: str) -> list[str] | None:
+    """Column names of a CSV file, or None when it cannot be read (the recording reader then says why)."""
+    import csv
+
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            for cells in csv.reader(fh):
+                if cells and any(c.strip() for c in cells):
+                    return [c.strip() for c in cells]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return None
+    return None
+
+
+def _read_recording(path: str, system, args, mapping: dict, scales: dict, outputs: list[str]):
+    """Read the columns of ``path`` that the fit needs (inputs and fitted outputs) as a Recording."""
+    from phs.workflows.recording import Recording
+
+    known = system.measured_names + system.output_names + system.state_names
+    column_of = {sig: col for col, sig in mapping.items()}
+    header = _csv_header(path)
+    columns = None
+    if header is not None:
+        if outputs:
+            wanted = system.input_names + outputs
+        else:
+            signal_of = {c: mapping.get(c, c) for c in header if c != args.time}
+            wanted = system.input_names + [signal_of[c] for c in signal_of if signal_of[c] in known]
+        columns = list(dict.fromkeys(column_of.get(sig, sig) for sig in wanted))
+        columns += [c for c in scales if c in header and c not in columns and c != args.time]
+    try:
+        return Recording.from_csv(path, time_column=args.time, mapping=mapping, scales=scales,
+                                  resample=args.resample, columns=columns)
+    except InputDataError as exc:  # say it with the command line's option names
+        raise InputDataError(str(exc).replace("pass resample=DT", "pass --resample DT")) from None
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    """Run ``phs fit`` with parsed arguments; returns the exit code.
+
+    Every check, the fit, the validation, the sensitivity table and every output (figure,
+    markdown, summary, JSON) are prepared in memory before the first file is written, so an
+    error writes nothing.
+    """
+    _check_writable(args.json)
+    if args.report is not None:
+        if os.path.exists(args.report) and not os.path.isdir(args.report):
+            raise InputDataError(f"--report {args.report!r} exists and is not a directory")
+        _check_writable(os.path.join(args.report, "summary.txt") if os.path.isdir(args.report) else args.report)
+    params = parse_assignments(args.param, "--param", numeric=True)
+    x0 = parse_assignments(args.x0, "--x0", numeric=True)
+    mapping = parse_assignments(args.map, "--map")
+    scales = parse_scales(args.scale)
+    free = _name_list(args.free, "--free")
+    outputs = _name_list(args.outputs, "--outputs")
+    system = load_model(args.model, params)
+    for name in free:
+        system.param(name)  # ParameterError naming an unknown parameter and the known ones
+    known = system.measured_names + system.output_names + system.state_names
+    seen: dict = {}
+    for column, signal in mapping.items():
+        if signal in seen:
+            raise InputDataError(f"--map: signal {signal!r} is mapped from two columns ({seen[signal]!r} and "
+                                 f"{column!r})")
+        seen[signal] = column
+        if signal not in system.input_names and signal not in known:
+            raise InputDataError(f"--map {column}={signal}: system {system.name!r} has no input or output "
+                                 f"{signal!r} (inputs: {', '.join(system.input_names) or 'none'}; measured: "
+                                 f"{', '.join(system.measured_names) or 'none'})")
+    bad = [o for o in outputs if o not in known]
+    if bad:
+        raise InputDataError(f"--outputs: system {system.name!r} has no output {bad[0]!r} "
+                             f"(measured: {', '.join(system.measured_names) or 'none'})")
+    if x0:
+        unknown = [k for k in x0 if k not in system.state_names]
+        if unknown:
+            raise InputDataError(f"--x0: system {system.name!r} has no state {unknown[0]!r} "
+                                 f"(states: {', '.join(system.state_names)})")
+    rec = _read_recording(args.data, system, args, mapping, scales, outputs)
+    _, fitted_outputs = rec.check_for(system, outputs or None)
+    val = None
+    if args.validate is not None:
+        val = _read_recording(args.validate, system, args, mapping, scales, fitted_outputs)
+        val.check_for(system, fitted_outputs)
+
+    from phs.workflows.identify import identify  # imported here: casadi is only needed once a model runs
+
+    result = identify(system, rec, free, x0=x0 or None, outputs=fitted_outputs, validation=val,
+                      max_iter=args.max_iter, progress=not args.quiet)
+    summary = _fit_summary_text(args, result)
+    sensitivity = {}
+    png = markdown = None
+    if args.report is not None:
+        for ch in reversed(fitted_outputs):  # the first channel last: it is the one kept in result.sensitivity
+            sensitivity[ch] = result.sensitivity_table(channel=ch)
+        sensitivity = {ch: sensitivity[ch] for ch in fitted_outputs}
+        png = _fit_figure_png(result)
+        markdown = sensitivity_markdown(sensitivity, result)
+    document = _fit_json(args, result, val, sensitivity) if args.json else None
+    print(summary)
+
+    if args.report is not None:
+        os.makedirs(args.report, exist_ok=True)
+        write_atomic(os.path.join(args.report, "fit.png"), png)
+        write_atomic(os.path.join(args.report, "sensitivity.md"), markdown)
+        write_atomic(os.path.join(args.report, "summary.txt"), summary + "\n")
+    if document is not None:
+        write_atomic(args.json, document)
+    return 0
+
+
+def _fit_summary_text(args: argparse.Namespace, result) -> str:
+    import phs
+
+    head = [f"phs {phs.__version__} fit {args.model} {args.data}" + (f" --validate {args.validate}" if args.validate
+                                                                      else ""),
+            f"model hash {result.system.model_hash()}; {len(result.residuals[result.outputs[0]])} samples; "
+            f"outputs {', '.join(result.outputs)}"]
+    return "\n".join(head + [result.summary()])
+
+
+def sensitivity_markdown(tables: dict, result=None) -> str:
+    """The ±5/±10 % sensitivity tables (one per channel) as markdown.
+
+    Parameters
+    ----------
+    tables : dict
+        ``{channel: {parameter: {step: fit %, ..., "std": sd}}}`` as returned per channel by
+        ``IdentificationResult.sensitivity_table``.
+    result : IdentificationResult, optional
+        Adds the fitted values to the table.
+
+    Examples
+    --------
+    >>> row = {-0.1: 80.0, -0.05: 90.0, 0.0: 95.0, 0.05: 90.0, 0.1: 80.0, "std": 6.52}
+    >>> print(sensitivity_markdown({"tip": {"K_b": row}}))  # doctest: +NORMALIZE_WHITESPACE
+    ## Sensitivity of the fit of `tip` (NRMSE fit %)
+    <BLANKLINE>
+    | parameter | -10 % | -5 % | 0 % | +5 % | +10 % | SD |
+    | --- | ---: | ---: | ---: | ---: | ---: | ---: |
+    | `K_b` | 80.00 | 90.00 | 95.00 | 90.00 | 80.00 | 6.5200 |
+    <BLANKLINE>
+    """
+    out = []
+    for ch, table in tables.items():
+        steps = sorted(k for row in table.values() for k in row if k != "std")
+        steps = list(dict.fromkeys(steps))
+        cols = [f"{s * 100:+.0f} %".replace("+0 %", "0 %") for s in steps]
+        fitted = result is not None
+        out.append(f"## Sensitivity of the fit of `{ch}` (NRMSE fit %)\n")
+        out.append("| parameter" + (" | fitted value" if fitted else "") + " | " + " | ".join(cols) + " | SD |")
+        out.append("| ---" + (" | ---:" if fitted else "") + " | ---:" * (len(cols) + 1) + " |")
+        for name, row in sorted(table.items(), key=lambda kv: -np.nan_to_num(kv[1]["std"], nan=-1.0)):
+            value = f" | {result.values[name]:.6g}" if fitted else ""
+            out.append(f"| `{name}`{value} | " + " | ".join(f"{row[s]:.2f}" for s in steps) + f" | {row['std']:.4f} |")
+        out.append("")
+    if result is not None:
+        out.append("Each row moves one fitted parameter alone by the given relative step and re-simulates; "
+                   "SD is the sample standard deviation of the five fits (the curling HASEL paper's Table 5). "
+                   "Rows are sorted from the most to the least sensitive parameter.\n")
+    return "\n".join(out)
+
+
+def _fit_figure_png(result) -> bytes:
+    import matplotlib.pyplot as plt
+
+    fig = result.plot()
+    try:
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=90)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+def _finite_or_none(obj):
+    """JSON-ready copy: NaN and infinities become null (strict JSON has no NaN)."""
+    if isinstance(obj, dict):
+        return {str(k): _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.ndarray):
+        return _finite_or_none(obj.tolist())
+    return obj
+
+
+def _fit_json(args: argparse.Namespace, result, val, sensitivity: dict) -> str:
+    import phs
+
+    doc = result.to_dict()
+    doc.update({
+        "command": "fit",
+        "model": args.model,
+        "data": args.data,
+        "phs_version": phs.__version__,
+        "x0": {name: float(v) for name, v in zip(result.system.state_names, result.x0, strict=True)},
+        "validation": None if val is None else {"data": args.validate, "samples": len(val),
+                                                "fit_percent": result.validation_fit_percent},
+    })
+    if sensitivity:
+        doc["sensitivity_by_channel"] = {ch: {k: {str(s): f for s, f in row.items()} for k, row in table.items()}
+                                         for ch, table in sensitivity.items()}
+    return json.dumps(_finite_or_none(doc), indent=1, allow_nan=False) + "\n"
+
+
 # -- entry point -------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``phs`` with one subparser per subcommand.
@@ -203,6 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"phs {phs.__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_simulate(sub)
+    _add_fit(sub)
     return parser
 
 
