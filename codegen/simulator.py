@@ -35,7 +35,7 @@ from codegen.results import SimulationResult
 from codegen.translate import Translator
 from phs.errors import DomainError, InputDataError, SimulationError
 from phs.params import TIME
-from phs.signals import Sampled, Signal, as_signal
+from phs.signals import Piecewise, Sampled, Signal, as_signal
 
 
 def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: float | None = None,
@@ -94,6 +94,8 @@ class Simulator:
     energy : bool
         Integrate the energy accounts (supplied, dissipated in total and per element) as
         quadratures of the same run (default); False skips them.
+    integrator_options : dict, optional
+        Extra CVODES options passed to CasADi (e.g. ``{"second_order_correction": False}``).
 
     Examples
     --------
@@ -105,7 +107,8 @@ class Simulator:
     0.632121
     """
 
-    def __init__(self, system, rtol=1e-8, atol=None, max_steps=20000, compile=False, energy=True):
+    def __init__(self, system, rtol=1e-8, atol=None, max_steps=20000, compile=False, energy=True,
+                 integrator_options=None):
         self.system = system
         self.f = generate(system)
         if not (0 < rtol < 1) or (atol is not None and not atol > 0):
@@ -115,6 +118,7 @@ class Simulator:
         self.max_steps = int(max_steps)
         self.compile = bool(compile)
         self.energy = bool(energy)
+        self.integrator_options = dict(integrator_options or {})
         self.scale = np.array([s.typical for s in system.states], dtype=float)
         self._integrators: dict = {}
         self._templates: dict = {}
@@ -147,6 +151,10 @@ class Simulator:
                     spec = as_signal(e)
                 except Exception:  # a numpy-only callable: sample it on the grid
                     spec = Sampled(tuple(t), tuple(np.asarray(spec(t), dtype=float)))
+            if isinstance(spec, Sampled) and spec.hold == "zoh":  # held samples jump: restart at each change
+                vals = np.asarray(spec.values, dtype=float)
+                tt = np.asarray(spec.times, dtype=float)
+                spec = Piecewise(tuple(tt[1:]), tuple(vals[1:]), float(vals[0])) if len(tt) > 1 else float(vals[0])
             try:
                 out.append(as_signal(spec))
             except InputDataError as exc:
@@ -188,10 +196,15 @@ class Simulator:
             segs.append((a, b, choice))
         return segs, slots
 
-    def _integrator(self, n: int, slots, sampled_grids):
+    def _integrator(self, n: int, slots, sampled):
+        """CVODES integrator over ``n`` output steps for the given input templates and sampled inputs.
+
+        ``sampled[j]`` is ``(times, values)`` for an input given by samples (baked into a linear
+        interpolant: evaluation costs O(log n), not O(n)), else None.
+        """
         key = (n, tuple(tuple(k for k, _, _ in sl) for sl in slots),
-               tuple(hashlib.sha1(np.ascontiguousarray(g).tobytes()).hexdigest() if g is not None else None
-                     for g in sampled_grids))
+               tuple(hashlib.sha1(np.ascontiguousarray(g[0]).tobytes() + np.ascontiguousarray(g[1]).tobytes()).hexdigest()
+                     if g is not None else None for g in sampled))
         hit = self._integrators.get(key)
         if hit is not None:
             return hit
@@ -206,13 +219,11 @@ class Simulator:
         extra, uexpr = [], []
         layout = []
         for j in range(nu):
-            if sampled_grids[j] is not None:
-                grid = sampled_grids[j]
-                vals = ca.SX.sym(f"v{j}", len(grid))
-                interp = ca.interpolant(f"u{j}", "linear", [np.asarray(grid)], 1)
-                uexpr.append(interp(tt, vals))
-                extra.append(vals)
-                layout.append(("sampled", len(grid)))
+            if sampled[j] is not None:
+                grid, values = sampled[j]
+                interp = ca.interpolant(f"u{j}", "linear", [np.asarray(grid, dtype=float)], np.asarray(values, dtype=float))
+                uexpr.append(interp(tt))
+                layout.append(("sampled", 0))
                 continue
             terms = []
             lay = []
@@ -243,6 +254,10 @@ class Simulator:
             dae = compiled(dae, f"{self.system.model_hash()}|{key[1:]}|{self.scale.tolist()}")
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
                 "disable_internal_warnings": True}  # failures are reported as PHS errors instead
+        if any(g is not None for g in sampled):
+            # a sampled input may change after a long constant stretch: never step over an output interval
+            opts["max_step_size"] = 1.0
+        opts.update(self.integrator_options)
         F = ca.integrator(f"{self.f.rhs.name()}_cvodes{n}", "cvodes", dae, 0.0, np.arange(1.0, n + 1.0), opts)
         self._integrators[key] = (F, layout)
         return F, layout
@@ -288,8 +303,8 @@ class Simulator:
         self._check_domain(x[None, :], t[:1], p, np.zeros((1, len(s.inputs))))
         sigs = self._signals(u, t)
         segs, slots = self._plan(sigs, t)
-        sampled = [np.asarray(sg.times) if isinstance(sg, Sampled) else None for sg in sigs]
-        sampled_vals = [np.asarray(sg.values) if isinstance(sg, Sampled) else None for sg in sigs]
+        sampled = [(np.asarray(sg.times), np.asarray(sg.values)) if isinstance(sg, Sampled) else None for sg in sigs]
+        sampled_vals = None
         nq = 2 + len(s.dissipators) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))
@@ -388,8 +403,7 @@ class Simulator:
     def _pvec(self, p, a, h, layout, choice, sampled_vals):
         parts = [p, [a, h]]
         for j, lay in enumerate(layout):
-            if lay[0] == "sampled":
-                parts.append(sampled_vals[j])
+            if lay[0] == "sampled":  # baked into the integrator
                 continue
             active, vals = choice[j]
             for k, nc in enumerate(lay[1]):

@@ -77,7 +77,8 @@ class IdentificationResult:
         return self.system.with_params({k: v for k, v in self.values.items() if k in self.system.param_names})
 
     def summary(self) -> str:
-        lines = [f"Identification of {self.system.name!r}: {len(self.free)} parameters, cost {self.cost:.6g}, "
+        lines = [f"Identification of {self.system.name!r}: {len(self.free)} parameter{'s' if len(self.free) != 1 else ''}, "
+                 f"cost {self.cost:.6g}, "
                  f"{self.iterations} iterations, {self.seconds:.2f} s ({self.message})"]
         lines.append(f"  {'parameter':<14}{'initial':>12}{'fitted':>14}{'std error':>12}   95 % interval")
         for k in self.free:
@@ -177,10 +178,12 @@ class _Problem:
         t = recording.t
         N = len(t)
         self.N = N
-        sim = Simulator(system, rtol=rtol, atol=atol)
+        # no energy quadratures; the second-order correction of the sensitivity Jacobian changes
+        # the sensitivities by ~1e-7 relative and costs most of the time
+        sim = Simulator(system, rtol=rtol, atol=atol, energy=False,
+                        integrator_options={"second_order_correction": False})
         scale = sim.scale
         nx, nu = len(system.states), len(system.inputs)
-        grids = [t] * nu
         pnames = system.param_names
         p0 = system.param_vector()
         self.nominal = np.array([p0[pnames.index(k)] for k in free])
@@ -199,7 +202,7 @@ class _Problem:
             i = system.state_names.index(name)
             x0v[i] = xi[j] * scale[i]
         U = np.column_stack([recording[u] for u in system.input_names]) if nu else np.zeros((N, 0))
-        Ucols = [ca.DM(U[:, j]) for j in range(nu)]
+        grids = [(t, U[:, j]) for j in range(nu)]
         # multiple shooting: K windows, each integrated from its own (scaled) initial state; the
         # continuity defects enter the least squares with a large weight (quadratic penalty)
         K = max(1, min(int(shooting), (N - 1) // 3))
@@ -211,7 +214,7 @@ class _Problem:
         for k in range(K):
             i0, i1 = int(edges[k]), int(edges[k + 1])
             F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids)
-            P = ca.vertcat(pvec, ca.DM([t[i0], t[1] - t[0]]), *Ucols)
+            P = ca.vertcat(pvec, ca.DM([t[i0], t[1] - t[0]]))
             xf = F(x0=start / ca.DM(scale), p=P)["xf"] * ca.repmat(ca.DM(scale), 1, i1 - i0)
             if k < K - 1:
                 cols.append(xf[:, :-1])
@@ -241,12 +244,17 @@ class _Problem:
             r = ca.vertcat(r, wdef * ca.vertcat(*defects))
         self.n_outputs_residual = N * len(outputs)
         z = ca.vertcat(theta, xi, ca.vec(S))
+        self._res = ca.Function("residual", [z, wdef], [r])
+        self.n_rows = r.numel()
         self._jac = ca.Function("residual_jac", [z, wdef], [r, ca.jacobian(r, z)])
         self.defect_weight = defect_weight
         self.n_theta = len(free)
 
     def jac(self, z):
         return self._jac(z, self.defect_weight)
+
+    def res(self, z):
+        return self._res(z, self.defect_weight)
 
     def values(self, z, log_scaled, free):
         th = z[: self.n_theta]
@@ -381,23 +389,23 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     last = {}
 
     def fun(z):
+        """Residual only: sensitivities are computed by ``jac`` for accepted points."""
         try:
-            r, J = prob.jac(z)
-        except RuntimeError:
-            r = last.get("r")
-            return (np.full(prob.N * len(outs), 1e6) if r is None else 10 * np.abs(r) + 1e3)
-        r = np.asarray(r).reshape(-1)
-        last.update(z=np.array(z), r=r, J=np.asarray(J))
+            r = np.asarray(prob.res(z)).reshape(-1)
+        except RuntimeError:  # the simulation failed at this trial point: a large residual rejects it
+            r_prev = last.get("r")
+            return np.full(prob.n_rows, 1e6) if r_prev is None else 10 * np.abs(r_prev) + 1e3
+        last.update(r=r)
         if progress:
             it[0] += 1
             print(f"  identify {system.name}: evaluation {it[0]}, cost {0.5 * r @ r:.6g}", file=sys.stderr, flush=True)
         return r
 
     def jac(z):
-        if "z" in last and np.array_equal(last["z"], z):
-            return last["J"]
-        fun(z)
-        return last["J"]
+        try:
+            return np.asarray(prob.jac(z)[1])
+        except RuntimeError as exc:
+            raise PHSError(f"identify {system.name!r}: the sensitivity simulation failed: {str(exc).splitlines()[-1]}") from None
 
     # multiple shooting: continuation on the defect weight, from loose (windows fit the data
     # almost freely) to tight (one continuous trajectory)
