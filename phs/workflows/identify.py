@@ -25,10 +25,12 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 import scipy.optimize
+import sympy as sp
 
 from codegen.functions import generate
 from codegen.simulator import Simulator, simulate
 from phs.errors import InputDataError, ParameterError, PHSError
+from phs.params import TIME
 from phs.signals import Sampled
 
 
@@ -169,6 +171,15 @@ def evaluate_fit(system, recording, outputs, x0=None, params=None) -> dict:
     return {ch: nrmse_fit(recording[ch], sim[ch]) for ch in outputs}
 
 
+def _kinks(U: np.ndarray) -> list[int]:
+    """Sample indices where a uniformly sampled input's slope changes (its linear interpolant's kinks)."""
+    if U.size == 0 or len(U) < 3:
+        return []
+    d2 = np.abs(U[2:] - 2 * U[1:-1] + U[:-2])
+    tol = 1e-12 * max(float(np.max(np.abs(U))), 1e-300)
+    return sorted({int(k) + 1 for k in np.nonzero(np.any(d2 > tol, axis=1))[0]})
+
+
 class _Problem:
     """The residual and its exact Jacobian as CasADi functions of the fit coordinates."""
 
@@ -206,23 +217,42 @@ class _Problem:
         # multiple shooting: K windows, each integrated from its own (scaled) initial state; the
         # continuity defects enter the least squares with a large weight (quadratic penalty)
         K = max(1, min(int(shooting), (N - 1) // 3))
-        edges = np.linspace(0, N - 1, K + 1).round().astype(int)
+        ms_edges = [int(e) for e in np.linspace(0, N - 1, K + 1).round().astype(int)]
         S = ca.MX.sym("s", nx, K - 1)
-        self.window_starts = edges[1:-1]
+        self.window_starts = np.array(ms_edges[1:-1], dtype=int)
+        # a recorded input that is piecewise linear with few kinks (steps, staircases, square waves
+        # as sampled) is integrated piece by piece with restarts at its kinks, so CVODES takes long
+        # steps in between; otherwise it is interpolated and the step bounded by the sample interval
+        kinks = _kinks(U)
+        piecewise = nu > 0 and len(kinks) <= max(20, (N - 1) // 20)
+        cuts = sorted(set(ms_edges) | (set(kinks) if piecewise else set()))
+        lin = "_c0 + _c1*t"
+        tmpl = sp.sympify(lin, locals={"t": TIME, "_c0": sp.Symbol("_c0", real=True), "_c1": sp.Symbol("_c1", real=True)})
+        slots = [[(sp.srepr(tmpl), tmpl, 2)] for _ in range(nu)] if piecewise else [[] for _ in range(nu)]
         cols, defects = [x0v], []
         start = x0v
-        for k in range(K):
-            i0, i1 = int(edges[k]), int(edges[k + 1])
-            F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids)
-            P = ca.vertcat(pvec, ca.DM([t[i0], t[1] - t[0]]))
+        dt = t[1] - t[0]
+        for i0, i1 in zip(cuts[:-1], cuts[1:]):
+            if piecewise:
+                F, _layout = sim._integrator(i1 - i0, slots, [None] * nu)
+                coef = []
+                for j in range(nu):
+                    slope = (U[i1, j] - U[i0, j]) / (t[i1] - t[i0])
+                    coef += [1.0, U[i0, j] - slope * t[i0], slope]
+                P = ca.vertcat(pvec, ca.DM([t[i0], dt] + coef))
+            else:
+                F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids)
+                P = ca.vertcat(pvec, ca.DM([t[i0], dt]))
             xf = F(x0=start / ca.DM(scale), p=P)["xf"] * ca.repmat(ca.DM(scale), 1, i1 - i0)
-            if k < K - 1:
+            if i1 in ms_edges[1:-1]:
+                k = ms_edges.index(i1) - 1
                 cols.append(xf[:, :-1])
                 defects.append(xf[:, -1] / ca.DM(scale) - S[:, k])
                 start = S[:, k] * ca.DM(scale)
                 cols.append(start)
             else:
                 cols.append(xf)
+                start = xf[:, -1]
         X = ca.horzcat(*cols)
         gen = generate(system)
         fo = gen.output.map(N, "serial")
