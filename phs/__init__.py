@@ -31,7 +31,7 @@ __all__ = [
     "Component", "symbol_of_input", "symbol_of_output", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
     "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
     "bond", "feedback_link", "feedback", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
-    "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "load",
+    "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "identify", "Recording", "load",
 ]
 
 
@@ -51,8 +51,17 @@ def load(path):
 
 
 def __getattr__(name):
+    """Workflows are imported on first use, so ``import phs`` never imports casadi."""
     if name == "simulate":
         from codegen.simulator import simulate
 
         return simulate
+    if name == "identify":
+        from phs.workflows.identify import identify
+
+        return identify
+    if name == "Recording":
+        from phs.workflows.recording import Recording
+
+        return Recording
     raise AttributeError(f"module 'phs' has no attribute {name!r}")
