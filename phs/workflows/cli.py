@@ -43,14 +43,17 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", metavar="FILE", help="write a JSON summary")
 
 
-def _positive(option: str):
-    def convert(text: str) -> float:
+def _positive(option: str, integer: bool = False):
+    """argparse type: a positive finite number (an integer >= 1 when ``integer``), errors naming the option."""
+    what = "a positive integer" if integer else "a positive finite number"
+
+    def convert(text: str):
         try:
-            v = float(text)
+            v = int(text) if integer else float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+            raise argparse.ArgumentTypeError(f"{option} must be {what}, got {text!r}") from None
         if not (math.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"{option} must be a positive finite number, got {text!r}")
+            raise argparse.ArgumentTypeError(f"{option} must be {what}, got {text!r}")
         return v
 
     return convert
@@ -205,23 +208,10 @@ def _add_fit(sub) -> None:
                    help="measured outputs to fit (default: every one the recording provides)")
     p.add_argument("--validate", metavar="DATA2", help="second CSV recording scored with the fitted model")
     p.add_argument("--report", metavar="DIR", help="write DIR/fit.png, DIR/sensitivity.md and DIR/summary.txt")
-    p.add_argument("--max-iter", type=_positive_int("--max-iter"), default=100, metavar="N",
+    p.add_argument("--max-iter", type=_positive("--max-iter", integer=True), default=100, metavar="N",
                    help="maximum number of residual evaluations (default 100)")
     p.add_argument("--quiet", action="store_true", help="do not print the optimiser's progress on stderr")
     p.set_defaults(run=run_fit)
-
-
-def _positive_int(option: str):
-    def convert(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{option} must be a positive integer, got {text!r}") from None
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{option} must be a positive integer, got {text!r}")
-        return v
-
-    return convert
 
 
 def _name_list(text: str | None, option: str) -> list[str]:
