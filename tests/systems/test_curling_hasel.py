@@ -200,3 +200,17 @@ def test_leaving_the_validity_domain_stops_with_a_clear_message(hasel):
         simulate(hasel, np.linspace(0, 0.2, 201), u={"U": 10000.0}, x0=X0)
     msg = str(err.value)
     assert "input map" in msg and "t=" in msg and "seg1.theta=" in msg
+
+
+def test_serial_chain_inertia_option():
+    # eq. 12: the segments share one configuration-dependent inertia M(theta) (KinematicChain)
+    s = curling_hasel(3, inertia="chain")
+    assert [n for n in s.state_names if n.endswith(".p")] == ["seg1.p", "seg2.p", "seg3.p"]
+    J = s.J
+    i1, i3 = s.state_names.index("seg1.theta"), s.state_names.index("seg3.p")
+    # theta_1' = dH/dp_1 only: the coupling between joints is in H (M(theta)), not in J
+    assert J[i1, i3] == 0
+    x0 = {f"seg{i}.l_p": 0.015 for i in range(1, 4)}
+    res = simulate(s, np.linspace(0, 1, 1001), u={"U": 5000.0}, x0=x0, rtol=1e-9)
+    assert res.energy_balance_error() <= 1e-6
+    assert res["tip"][-1] > 0.01
