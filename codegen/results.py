@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
+import io
 from functools import cached_property
 
 import numpy as np
 
 from codegen.functions import generate
-from phs.errors import InputDataError
+from phs.io import write_atomic
 
 
 class SimulationResult:
@@ -162,17 +161,7 @@ class SimulationResult:
 
 
 def write_csv_atomic(path, header, data) -> None:
-    """Write a CSV file so that either the whole file appears or nothing does."""
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(d):
-        raise InputDataError(f"cannot write {path!r}: directory {d!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".csv", dir=d)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            np.savetxt(fh, data, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write a CSV file so that either the whole file appears or nothing does (:func:`phs.io.write_atomic`)."""
+    buf = io.StringIO()
+    np.savetxt(buf, data, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+    write_atomic(path, buf.getvalue())
