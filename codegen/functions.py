@@ -25,7 +25,10 @@ from phs.system import PHSystem
 
 @dataclass(frozen=True)
 class GeneratedFunctions:
-    """The generated functions of one system and the symbols they were built from.
+    """The generated functions of one system structure and the symbols they were built from.
+
+    ``system`` is the system they were first generated for; systems that differ from it only in
+    parameter values share the functions (parameters are their input ``p``).
 
     Examples
     --------
@@ -54,6 +57,7 @@ class GeneratedFunctions:
 
 
 _CACHE: weakref.WeakKeyDictionary[PHSystem, GeneratedFunctions] = weakref.WeakKeyDictionary()
+_BY_HASH: weakref.WeakValueDictionary[str, GeneratedFunctions] = weakref.WeakValueDictionary()
 
 
 def generate(system: PHSystem) -> GeneratedFunctions:
@@ -70,6 +74,13 @@ def generate(system: PHSystem) -> GeneratedFunctions:
     """
     hit = _CACHE.get(system)
     if hit is not None:
+        return hit
+    # parameters are inputs of the functions: systems differing only in parameter values
+    # (``with_params``) share them
+    key = system.model_hash()
+    hit = _BY_HASH.get(key)
+    if hit is not None:
+        _CACHE[system] = hit
         return hit
     name = c_identifier(system.name).replace("__", "_")  # CasADi function names may not hold '__'
     nx, nu, npar = len(system.states), len(system.inputs), len(system.params)
@@ -123,4 +134,5 @@ def generate(system: PHSystem) -> GeneratedFunctions:
             "dissipated": dissipated, "supplied": supplied, "dissipators": diss, "J": J, "R": R, "G": G, "P": P},
     )
     _CACHE[system] = out
+    _BY_HASH[key] = out
     return out

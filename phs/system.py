@@ -501,6 +501,7 @@ class PHSystem:
             [sp.srepr(t.expr) for t in self.energy_terms], sp.srepr(self.J), sp.srepr(self.R), sp.srepr(self.G),
             sp.srepr(self.P), sp.srepr(self.S), sp.srepr(self.N), [(m.name, sp.srepr(m.expr)) for m in self.measured],
             [(c.label, sp.srepr(c.expr)) for c in self.conditions],
+            [(label, sorted((k, sp.srepr(v)) for k, v in entries.items())) for label, entries in self.dissipators],
         ):
             h.update(repr(part).encode())
         return h.hexdigest()[:16]
