@@ -304,7 +304,6 @@ class Simulator:
         sigs = self._signals(u, t)
         segs, slots = self._plan(sigs, t)
         sampled = [(np.asarray(sg.times), np.asarray(sg.values)) if isinstance(sg, Sampled) else None for sg in sigs]
-        sampled_vals = None
         nq = 2 + len(s.dissipators) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))
@@ -331,11 +330,11 @@ class Simulator:
                 pts.append(b)
             for ra, rh, rn in _runs(pts):
                 F, layout = self._integrator(rn, slots, sampled)
-                P = self._pvec(p, ra, rh, layout, choice, sampled_vals)
+                P = self._pvec(p, ra, rh, layout, choice)
                 try:
                     zs, qs = _call_into_numpy(F, z, P, len(x), rn, nq)
                 except RuntimeError as exc:
-                    self._localize_failure(F, z, p, ra, rh, rn, slots, sampled, layout, choice, sampled_vals, exc, sigs)
+                    self._localize_failure(F, z, p, ra, rh, rn, slots, sampled, layout, choice, exc, sigs)
                 times = ra + rh * np.arange(1, rn + 1)
                 xs = zs * self.scale
                 if not np.all(np.isfinite(xs)):
@@ -400,7 +399,7 @@ class Simulator:
             raise InputDataError(f"x0 has a non-finite value for state {s.state_names[int(np.argmin(np.isfinite(arr)))]!r}")
         return arr.copy()
 
-    def _pvec(self, p, a, h, layout, choice, sampled_vals):
+    def _pvec(self, p, a, h, layout, choice):
         parts = [p, [a, h]]
         for j, lay in enumerate(layout):
             if lay[0] == "sampled":  # baked into the integrator
@@ -479,13 +478,13 @@ class Simulator:
                     + "; last state inside: " + _fmt_state(s, x)
                 )
 
-    def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, sampled_vals, exc, sigs):
+    def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, exc, sigs):
         """Re-run the failed run one output step at a time to name the failing interval and state."""
         s = self.system
         F1, _ = self._integrator(1, slots, sampled)
         zc = z
         for k in range(n):
-            P = self._pvec(p, a + k * h, h, layout, choice, sampled_vals)
+            P = self._pvec(p, a + k * h, h, layout, choice)
             try:
                 zc = np.asarray(F1(x0=zc, p=P)["xf"]).reshape(-1)
             except RuntimeError:
