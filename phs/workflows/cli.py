@@ -15,6 +15,7 @@ phs ...
 from __future__ import annotations
 
 import argparse
+import importlib
 import io
 import json
 import math
@@ -31,6 +32,15 @@ from phs.workflows.inputs import input_signals, parse_assignments
 from phs.workflows.loader import load_model
 
 EXIT_ERROR = 2
+
+# Subcommands defined in their workflow's own module: each has ``add_subcommand(sub)``, which adds
+# its parser and sets ``run`` (a function of the parsed arguments returning the exit code).
+_SUBCOMMAND_MODULES: tuple[str, ...] = (
+    # passivity
+    # control
+    # diagnose
+    # sweep
+)
 
 
 # -- shared options ------------------------------------------------------------------------
@@ -497,6 +507,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_simulate(sub)
     _add_fit(sub)
+    for module in _SUBCOMMAND_MODULES:
+        importlib.import_module(module).add_subcommand(sub)
     return parser
 
 
