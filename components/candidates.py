@@ -1,0 +1,721 @@
+"""Candidate physics: effects a model may have left out, each attachable to a named part of a PHSystem.
+
+Diagnosis (:func:`phs.diagnose`) tries each candidate on the fitted model and keeps the ones the
+recording asks for.  A candidate is one small class with one idea (:class:`Candidate`):
+
+* :meth:`Candidate.attach_points` lists where it can go in a given system (a state, an input or a
+  measured output, by name);
+* :meth:`Candidate.augment` returns an :class:`Augmentation`: the augmented system (still a
+  port-Hamiltonian system: J skew, R symmetric positive semi-definite, H bounded below), its new
+  parameters with starting values, bounds and scales, and the initial values of new states.
+
+Three ways an effect enters a model:
+
+``structure``
+    New energy, new dissipation or new states added to J, R, H (friction, creep, hysteresis,
+    stiffness, added mass, leakage, charge retention) or a resistor inserted at an input port
+    (series resistance).  Elements in series with a storage are inserted by the congruence
+    ``J' = TᵀJT``, ``R' = TᵀRT + diag(0, R_new)`` with ``T = [I, E]``: the storage's co-energy is
+    replaced by the sum of its own and the new element's, which is what "in series" means.
+``input``
+    A transformation of an input signal before it reaches the model (saturation, slew-rate limit,
+    delay): the amplifier or the actuator's drive, outside the port-Hamiltonian part.  Such an
+    element has a numeric :meth:`InputElement.transform` and its parameters are fitted by a bounded
+    search on the simulated output.
+``measured``
+    A change of a measured output (a sensor offset).
+
+Register a new candidate by subclassing :class:`Candidate` (or :class:`InputElement`) and passing an
+instance to ``diagnose(..., candidates=[...])``; :data:`LIBRARY` holds the built-in ones.
+
+Examples
+--------
+>>> from systems.examples import mass_spring_damper
+>>> s = mass_spring_damper()
+>>> CoulombFriction().attach_points(s)
+['m.p']
+>>> aug = CoulombFriction().augment(s, "m.p", Scales.of(s))
+>>> aug.free, aug.system.check().ok
+(['coulomb_friction.F_c'], True)
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from phs.errors import ModelError
+from phs.params import EnergyTerm, Measured, Param, StateInfo
+from phs.units import parse_unit
+
+_MECHANICAL_POSITION = ("m", "rad")
+
+
+# -- context: typical magnitudes ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Scales:
+    """Typical magnitudes along the nominal model's fit, used to start and bound new parameters.
+
+    ``value[name]``: RMS deviation of a state, input or measured output from its mean;
+    ``level[name]``: RMS value (about zero); ``coenergy[state]``: RMS of ∂H/∂x for that state
+    (velocity of a momentum, voltage of a charge, force of a displacement); ``rate[state]``: RMS of the
+    state's time derivative; ``duration``: recording length [s]; ``dt``: sampling step [s].
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> Scales.of(rc_circuit()).duration
+    1.0
+    """
+
+    value: dict = field(default_factory=dict)
+    level: dict = field(default_factory=dict)
+    coenergy: dict = field(default_factory=dict)
+    rate: dict = field(default_factory=dict)
+    duration: float = 1.0
+    dt: float = 1e-3
+
+    @staticmethod
+    def of(system, t=None, x=None, u=None, measured=None) -> Scales:
+        """Scales from a trajectory (arrays ``x`` (N, n), ``u`` (N, m), ``measured`` dict), or, without
+        one, from the states' declared typical magnitudes."""
+        value, level, co, rate = {}, {}, {}, {}
+        if x is None:
+            for st in system.states:
+                value[st.name] = level[st.name] = st.typical
+            xs = np.array([[st.typical * 0.5 for st in system.states]])
+            us = np.ones((1, len(system.inputs)))
+            t = np.array([0.0, 1.0])
+        else:
+            xs, us = np.asarray(x, float), np.asarray(u, float).reshape(len(x), -1)
+            for i, st in enumerate(system.states):
+                value[st.name] = _rms(xs[:, i] - xs[:, i].mean())
+                level[st.name] = _rms(xs[:, i])
+            for j, name in enumerate(system.input_names):
+                value[name] = _rms(us[:, j] - us[:, j].mean())
+                level[name] = _rms(us[:, j])
+            for k, v in (measured or {}).items():
+                value[k] = _rms(np.asarray(v) - np.mean(v))
+                level[k] = _rms(np.asarray(v))
+        grad = system.lambdify(system.grad_H, with_u=False)
+        idx = np.linspace(0, len(xs) - 1, min(len(xs), 400)).astype(int)
+        g = np.array([np.asarray(grad(xs[i]), float).reshape(-1) for i in idx])
+        for i, st in enumerate(system.states):
+            co[st.name] = _rms(g[:, i])
+        if len(xs) > 2:
+            dxdt = np.gradient(xs, np.asarray(t, float), axis=0)
+            for i, st in enumerate(system.states):
+                rate[st.name] = _rms(dxdt[:, i])
+        if x is None:
+            return Scales(value, level, co, rate, 1.0, 1e-3)
+        t = np.asarray(t, float)
+        return Scales(value, level, co, rate, float(t[-1] - t[0]) or 1.0, float(np.median(np.diff(t))) if len(t) > 1 else 1e-3)
+
+    def get(self, table: str, name: str, default: float = 1.0) -> float:
+        v = getattr(self, table).get(name, 0.0)
+        return float(v) if v and np.isfinite(v) and v > 0 else float(default)
+
+
+def _rms(v) -> float:
+    v = np.asarray(v, float)
+    return float(np.sqrt(np.mean(v * v))) if v.size else 0.0
+
+
+# -- result of attaching a candidate -----------------------------------------------------------------------
+@dataclass(frozen=True)
+class Augmentation:
+    """A model with one candidate attached.
+
+    ``system`` is the augmented PHSystem (for ``input`` elements, the unchanged system);
+    ``free`` the new parameters to fit (``bounds`` and ``log_scale`` for them);
+    ``x0`` initial values of new states; ``element`` the input element for ``input`` candidates.
+    """
+
+    effect: str
+    attached_to: str
+    component: str
+    system: object
+    free: list
+    bounds: dict
+    log_scale: list
+    x0: dict = field(default_factory=dict)
+    element: InputElement | None = None
+
+    @property
+    def n_params(self) -> int:
+        return len(self.free)
+
+
+class Candidate(ABC):
+    """One kind of physics a model may lack.  Subclasses set ``effect`` (its name), ``summary``
+    (a phrase for explanations), ``kind`` (``structure``, ``input`` or ``measured``) and implement
+    :meth:`attach_points` and :meth:`augment`."""
+
+    effect: str = ""
+    summary: str = ""
+    kind: str = "structure"
+
+    @abstractmethod
+    def attach_points(self, system) -> list[str]:
+        """Names of the states, inputs or measured outputs of ``system`` this candidate can attach to."""
+
+    @abstractmethod
+    def augment(self, system, where: str, scales: Scales) -> Augmentation:
+        """The system with this candidate attached at ``where``."""
+
+    def _check_where(self, system, where: str) -> None:
+        points = self.attach_points(system)
+        if where not in points:
+            raise ModelError(f"candidate {self.effect!r} cannot attach to {where!r} of {system.name!r}; "
+                             f"possible: {points or 'none'}")
+
+    def param(self, name: str, value: float, unit: str, description: str, rng) -> Param:
+        """A new parameter ``{effect}.{name}`` starting at ``value`` (moved inside ``rng`` if needed)."""
+        lo, hi = float(rng[0]), float(rng[1])
+        value = min(max(float(value), lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+        return Param(f"{self.effect}.{name}", value, unit, description, (lo, hi))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+# -- structural helpers --------------------------------------------------------------------------------------
+def _unit_of(system, name: str) -> str:
+    return system.states[system.state_names.index(name)].unit
+
+
+def momentum_states(system) -> list[str]:
+    """States of kind ``I`` (momenta) with a mechanical unit.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> momentum_states(mass_spring_damper())
+    ['m.p']
+    """
+    out = []
+    for st in system.states:
+        if st.kind == "I" and _same_dimension(st.unit, ("kg*m/s", "kg*m**2/s")):
+            out.append(st.name)
+    return out
+
+
+def displacement_states(system) -> list[str]:
+    """Displacement-like states with a length or angle unit."""
+    return [st.name for st in system.states if st.kind == "C" and _same_dimension(st.unit, _MECHANICAL_POSITION)]
+
+
+def charge_states(system) -> list[str]:
+    """Electrical charges (unit C)."""
+    return [st.name for st in system.states if st.kind == "C" and _same_dimension(st.unit, ("C",))]
+
+
+def _same_dimension(unit: str, candidates) -> bool:
+    try:
+        d = parse_unit(unit)
+        return any(d == parse_unit(c) for c in candidates)
+    except Exception:  # an unparsable unit is simply not of this kind
+        return False
+
+
+def _position_partner(system, p_name: str) -> str | None:
+    """The displacement state moved by momentum ``p_name`` (a nonzero J entry), if any."""
+    i = system.state_names.index(p_name)
+    for q in displacement_states(system):
+        j = system.state_names.index(q)
+        if system.J[j, i] != 0:
+            return q
+    return None
+
+
+def _zsyms(n: int) -> list[sp.Symbol]:
+    return [sp.Symbol(f"_z{i}", real=True) for i in range(n)]
+
+
+def _power(entries: dict, z) -> sp.Expr:
+    return sum(((1 if i == j else 2) * v * z[i] * z[j] for (i, j), v in entries.items()), sp.Integer(0))
+
+
+def _entries(power: sp.Expr, z) -> dict:
+    """Upper-triangle quadratic-form entries of ``power`` (quadratic in ``z``)."""
+    power = sp.expand(power)
+    out = {}
+    for i in range(len(z)):
+        for j in range(i, len(z)):
+            c = power.coeff(z[i], 2) if i == j else power.coeff(z[i], 1).coeff(z[j], 1) / 2
+            c = sp.simplify(c) if c.free_symbols & set(z) else c
+            if c != 0:
+                out[(i, j)] = c
+    return out
+
+
+def _rebuild(system, *, states=None, H=None, J=None, R=None, G=None, P=None, S=None, N=None, params=(),
+             dissipators=None, measured=None, effect: str = "") -> object:
+    """A new PHSystem from ``system`` with the given parts replaced and ``params`` added."""
+    from phs.system import PHSystem
+
+    return PHSystem(
+        system.name,
+        states=states if states is not None else system.states,
+        H=H if H is not None else list(system.energy_terms),
+        J=J if J is not None else system.J, R=R if R is not None else system.R,
+        G=G if G is not None else system.G, P=P if P is not None else system.P,
+        S=S if S is not None else system.S, N=N if N is not None else system.N,
+        inputs=system.inputs, params=tuple(system.params) + tuple(params),
+        measured=measured if measured is not None else system.measured,
+        conditions=[c for c in system.conditions if not c.label.endswith(f"in {system.name}")],
+        dissipators=dissipators if dissipators is not None else system.dissipators,
+        definitions=system.definitions,
+        description=(system.description + f" + {effect}") if effect else system.description,
+        structure=system.structure,
+    )
+
+
+def _add_states(system, new_states, new_energy, J_extra, R_extra, params, new_dissipators=(), effect=""):
+    """Append states: J, R grow by the given (n+k)x(n+k) additions; G, P get zero rows; dissipator
+    indices of inputs shift by k."""
+    n, k, m = len(system.states), len(new_states), len(system.inputs)
+    J = sp.zeros(n + k, n + k)
+    R = sp.zeros(n + k, n + k)
+    J[:n, :n] = system.J
+    R[:n, :n] = system.R
+    J += J_extra
+    R += R_extra
+    G = sp.zeros(n + k, m)
+    P = sp.zeros(n + k, m)
+    if m:
+        G[:n, :] = system.G
+        P[:n, :] = system.P
+
+    def shift(i):
+        return i if i < n else i + k
+
+    diss = [(lab, {(shift(i), shift(j)): v for (i, j), v in ent.items()}) for lab, ent in system.dissipators]
+    diss += list(new_dissipators)
+    return _rebuild(system, states=tuple(system.states) + tuple(new_states), H=list(system.energy_terms) + list(new_energy),
+                    J=J, R=R, G=G, P=P, params=params, dissipators=diss, effect=effect)
+
+
+def _add_damping(system, index: int, coefficient: sp.Expr, label: str, params, effect: str):
+    """R[i, i] += coefficient (a nonnegative expression), with its own dissipator entry."""
+    R = sp.Matrix(system.R)
+    R[index, index] += coefficient
+    diss = list(system.dissipators) + [(label, {(index, index): coefficient})]
+    return _rebuild(system, R=R, params=params, dissipators=diss, effect=effect)
+
+
+def _smooth_abs(v: sp.Expr, eps: float) -> sp.Expr:
+    return sp.sqrt(v**2 + sp.Float(eps) ** 2)
+
+
+def _log_range(ref: float, lo: float, hi: float) -> tuple[float, float]:
+    return (ref * lo, ref * hi)
+
+
+# -- mechanical candidates ---------------------------------------------------------------------------------------
+class _AtMomentum(Candidate):
+    def attach_points(self, system) -> list[str]:
+        return momentum_states(system)
+
+    def _refs(self, system, where, scales):
+        i = system.state_names.index(where)
+        v = system.grad_H[i]
+        v_ref = scales.get("coenergy", where, 1.0)
+        q = _position_partner(system, where)
+        f_ref = scales.get("coenergy", q, 0.0) if q else 0.0
+        if not f_ref:
+            f_ref = scales.get("rate", where, 1.0)
+        x_ref = scales.get("value", q, 1.0) if q else v_ref * scales.duration
+        return i, v, v_ref, f_ref, x_ref, q
+
+
+class CoulombFriction(_AtMomentum):
+    """Smooth, passive Coulomb friction on a body: force ``-F_c v / sqrt(v² + v_s²)``.
+
+    A dissipation ``R[p, p] += F_c / sqrt(v² + v_s²) ≥ 0`` with ``v = ∂H/∂p``; ``v_s`` is 5 % of the
+    typical velocity (fixed)."""
+
+    effect = "coulomb_friction"
+    summary = "a velocity-independent friction force opposing motion (Coulomb/dry friction)"
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        i, v, v_ref, f_ref, _, _ = self._refs(system, where, scales)
+        F = self.param("F_c", 0.02 * f_ref, "N", f"Coulomb friction force on {where}", _log_range(f_ref, 1e-4, 10.0))
+        coef = F.symbol / _smooth_abs(v, 0.05 * v_ref)
+        s = _add_damping(system, i, coef, f"{self.effect}@{where}", [F], self.effect)
+        return Augmentation(self.effect, where, "smooth Coulomb friction F_c·v/sqrt(v²+v_s²)", s, [F.name],
+                            {F.name: F.range}, [F.name])
+
+
+class QuadraticDrag(_AtMomentum):
+    """Quadratic (fluid) drag ``-c_d |v| v`` (smoothed): ``R[p, p] += c_d sqrt(v² + v_s²)``."""
+
+    effect = "quadratic_drag"
+    summary = "a drag force growing with the square of velocity (fluid drag)"
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        i, v, v_ref, f_ref, _, _ = self._refs(system, where, scales)
+        ref = f_ref / v_ref**2
+        c = self.param("c_d", 0.02 * ref, "N*s**2/m**2", f"quadratic drag coefficient on {where}", _log_range(ref, 1e-5, 100.0))
+        s = _add_damping(system, i, c.symbol * _smooth_abs(v, 0.02 * v_ref), f"{self.effect}@{where}", [c], self.effect)
+        return Augmentation(self.effect, where, "quadratic drag c_d·|v|·v", s, [c.name], {c.name: c.range}, [c.name])
+
+
+class ViscoelasticCreep(_AtMomentum):
+    """A Maxwell arm (spring ``k_m`` in series with a damper ``k_m·tau``) between the body and ground.
+
+    New state ``δ`` (arm deflection), ``H += k_m δ²/2``, ``δ̇ = v − δ/tau``, force ``−k_m δ`` on the body:
+    ``J[δ, p] = 1``, ``R[δ, δ] = 1/(k_m tau)``.  Together with the body's own spring it is a standard
+    linear solid: a step of force gives an instantaneous deflection and a slow creep."""
+
+    effect = "viscoelastic_creep"
+    summary = "a slow creep/relaxation of the structure after each load change (viscoelasticity)"
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        i, v, v_ref, f_ref, x_ref, q = self._refs(system, where, scales)
+        k_ref = f_ref / x_ref
+        tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
+        k = self.param("k_m", 0.1 * k_ref, "N/m", f"stiffness of the creep arm on {where}", _log_range(k_ref, 1e-4, 100.0))
+        tau = self.param("tau", tau0, "s", "creep time constant", (5 * scales.dt, 10 * scales.duration))
+        name = f"{self.effect}.delta"
+        unit = _unit_of(system, q) if q else "m"
+        st = StateInfo(name, unit, (-10 * x_ref, 10 * x_ref), f"deflection of the creep arm on {where}", "C", x_ref, self.effect)
+        d = st.symbol
+        n = len(system.states)
+        Jx = sp.zeros(n + 1, n + 1)
+        Jx[n, i], Jx[i, n] = 1, -1
+        Rx = sp.zeros(n + 1, n + 1)
+        Rx[n, n] = 1 / (k.symbol * tau.symbol)
+        s = _add_states(system, [st], [EnergyTerm(self.effect, k.symbol * d**2 / 2)], Jx, Rx, [k, tau],
+                        [(f"{self.effect}@{where}", {(n, n): 1 / (k.symbol * tau.symbol)})], self.effect)
+        return Augmentation(self.effect, where, "Maxwell arm (spring k_m in series with damper k_m·tau) to ground", s,
+                            [k.name, tau.name], {k.name: k.range, tau.name: tau.range}, [k.name, tau.name], {name: 0.0})
+
+
+class Hysteresis(_AtMomentum):
+    """Rate-independent hysteresis in passive Dahl/Duhem form.
+
+    New state ``z`` (elastic pre-sliding deflection), ``H += k_h z²/2``, ``ż = v − |v| z/z_s``: the
+    element's force ``k_h z`` saturates at ``F_h = k_h z_s`` and traces loops whose shape does not
+    depend on the rate.  PH form: ``J[z, p] = 1``, ``R[z, z] = |v| / F_h ≥ 0``."""
+
+    effect = "hysteresis"
+    summary = "a rate-independent hysteresis loop in force vs. displacement (Dahl/Duhem friction, plasticity)"
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        i, v, v_ref, f_ref, x_ref, q = self._refs(system, where, scales)
+        k_ref = f_ref / x_ref
+        k = self.param("k_h", 2.0 * k_ref, "N/m", f"pre-sliding stiffness of the hysteresis on {where}", _log_range(k_ref, 1e-3, 1e3))
+        F = self.param("F_h", 0.05 * f_ref, "N", f"saturation force of the hysteresis on {where}", _log_range(f_ref, 1e-4, 10.0))
+        name = f"{self.effect}.z"
+        unit = _unit_of(system, q) if q else "m"
+        st = StateInfo(name, unit, (-100 * x_ref, 100 * x_ref), f"pre-sliding deflection on {where}", "C", 0.05 * x_ref, self.effect)
+        z = st.symbol
+        n = len(system.states)
+        Jx = sp.zeros(n + 1, n + 1)
+        Jx[n, i], Jx[i, n] = 1, -1
+        Rx = sp.zeros(n + 1, n + 1)
+        coef = _smooth_abs(v, 1e-3 * v_ref) / F.symbol
+        Rx[n, n] = coef
+        s = _add_states(system, [st], [EnergyTerm(self.effect, k.symbol * z**2 / 2)], Jx, Rx, [k, F],
+                        [(f"{self.effect}@{where}", {(n, n): coef})], self.effect)
+        return Augmentation(self.effect, where, "Dahl hysteresis (k_h z²/2, ż = v − |v| k_h z / F_h)", s,
+                            [k.name, F.name], {k.name: k.range, F.name: F.range}, [k.name, F.name], {name: 0.0})
+
+
+class AddedMass(_AtMomentum):
+    """Extra inertia moving with the body (entrained fluid, unmodelled parts): ``H(p) → H(p/√(1+μ))``,
+    i.e. every kinetic term of ``p`` sees the mass times ``1 + μ``."""
+
+    effect = "added_mass"
+    summary = "more inertia than modelled (added/entrained mass)"
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        mu = self.param("mu", 0.05, "1", f"added mass as a fraction of the inertia of {where}", (1e-3, 20.0))
+        p = system.states[system.state_names.index(where)].symbol
+        sub = {p: p / sp.sqrt(1 + mu.symbol)}
+        H = [EnergyTerm(t.label, t.expr.subs(sub)) for t in system.energy_terms]
+        s = _rebuild(system, H=H, params=[mu], effect=self.effect)
+        return Augmentation(self.effect, where, "inertia scaled by (1 + mu)", s, [mu.name], {mu.name: mu.range}, [mu.name])
+
+
+class CubicStiffness(Candidate):
+    """A hardening (or softening) spring term ``H += k3 q⁴/4``: a force ``k3 q³`` (Duffing).  It starts
+    at 5 % of ``k_ref/q_ref²`` (typical stiffness and displacement along the nominal fit) and may
+    go down to -0.3 of that (softening, bounded so H stays bounded below over the typical range)."""
+
+    effect = "cubic_stiffness"
+    summary = "a stiffness that changes with deflection (cubic, Duffing-type spring)"
+
+    def attach_points(self, system):
+        return displacement_states(system)
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        q_ref = scales.get("level", where, 1.0)
+        k_ref = scales.get("coenergy", where, 1.0) / q_ref
+        ref = k_ref / q_ref**2
+        unit = _unit_of(system, where)
+        k3 = self.param("k3", 0.05 * ref, f"J/({unit})**4", f"cubic stiffness coefficient of {where}", (-0.3 * ref, 100 * ref))
+        q = system.states[system.state_names.index(where)].symbol
+        s = _rebuild(system, H=list(system.energy_terms) + [EnergyTerm(f"{self.effect}@{where}", k3.symbol * q**4 / 4)],
+                     params=[k3], effect=self.effect)
+        return Augmentation(self.effect, where, "quartic spring energy k3·q⁴/4", s, [k3.name], {k3.name: k3.range}, [])
+
+
+# -- electrical candidates ------------------------------------------------------------------------------------
+class Leakage(Candidate):
+    """A conductance across a capacitor (charge leaking through the dielectric): ``R[Q, Q] += G_l``."""
+
+    effect = "leakage"
+    summary = "charge leaking through the dielectric (a conductance across the capacitor)"
+
+    def attach_points(self, system):
+        return charge_states(system)
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        i = system.state_names.index(where)
+        g_ref = scales.get("rate", where, 1.0) / scales.get("coenergy", where, 1.0)
+        G = self.param("G_l", 0.02 * g_ref, "S", f"leakage conductance across {where}", _log_range(g_ref, 1e-5, 100.0))
+        s = _add_damping(system, i, G.symbol, f"{self.effect}@{where}", [G], self.effect)
+        return Augmentation(self.effect, where, "conductance G_l across the capacitor", s, [G.name], {G.name: G.range}, [G.name])
+
+
+class ChargeRetention(Candidate):
+    """An RC branch (``C_r`` parallel to ``R_r``) in series with a capacitor: charge retained in the
+    dielectric that relaxes with ``tau = R_r C_r`` — the drift branch of the curling HASEL model.
+
+    Inserted by congruence: the capacitor's voltage seen by the network becomes ``∂H/∂Q + Q_r/C_r``
+    and the branch charge obeys ``Q̇_r = Q̇ − (Q_r/C_r)/R_r``."""
+
+    effect = "charge_retention"
+    summary = "a slow charge drift in the dielectric after each voltage change (charge retention, RC branch)"
+
+    def attach_points(self, system):
+        return charge_states(system)
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        c_ref = scales.get("level", where, 1.0) / scales.get("coenergy", where, 1.0)
+        tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
+        C = self.param("C_r", 20 * c_ref, "F", f"retention capacitance in series with {where}", _log_range(c_ref, 0.1, 1e4))
+        tau = self.param("tau", tau0, "s", "retention time constant R_r·C_r", (5 * scales.dt, 10 * scales.duration))
+        name = f"{self.effect}.Q"
+        q_ref = scales.get("level", where, 1.0)
+        st = StateInfo(name, "C", (-100 * q_ref, 100 * q_ref), f"charge of the retention branch at {where}", "C", q_ref, self.effect)
+        s = _series_with_storage(system, where, st, st.symbol**2 / (2 * C.symbol), 1 / (tau.symbol / C.symbol), [C, tau],
+                                 self.effect)
+        return Augmentation(self.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the capacitor", s,
+                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], {name: 0.0})
+
+
+def _series_with_storage(system, where, state: StateInfo, energy: sp.Expr, conductance: sp.Expr, params, effect):
+    """Insert a one-state element (energy ``energy``, a conductance across it) in series with storage
+    ``where`` by the congruence T = [I, E]."""
+    n, m = len(system.states), len(system.inputs)
+    i = system.state_names.index(where)
+    T = sp.zeros(n, n + 1)
+    T[:, :n] = sp.eye(n)
+    T[i, n] = 1
+    J = T.T * system.J * T
+    R = T.T * system.R * T
+    R[n, n] += conductance
+    G = T.T * system.G if m else sp.zeros(n + 1, 0)
+    P = T.T * system.P if m else sp.zeros(n + 1, 0)
+    z_old, z_new = _zsyms(n + m), _zsyms(n + 1 + m)
+    # old z = [dH; u] -> new: dH_i gets e_new added; u indices shift by one
+    sub = {z_old[k]: (z_new[k] if k < n else z_new[k + 1]) for k in range(n + m)}
+    sub[z_old[i]] = z_new[i] + z_new[n]
+    diss = [(lab, _entries(_power(ent, z_old).xreplace(sub), z_new)) for lab, ent in system.dissipators]
+    diss.append((f"{effect}@{where}", {(n, n): conductance}))
+    return _rebuild(system, states=tuple(system.states) + (state,), H=list(system.energy_terms) + [EnergyTerm(effect, energy)],
+                    J=J, R=R, G=G, P=P, params=params, dissipators=diss, effect=effect)
+
+
+class SeriesResistance(Candidate):
+    """A resistor ``R_a`` in series with an effort (voltage/force) input: the model sees
+    ``u − R_a y`` where ``y`` is the port's conjugate output (the source current)."""
+
+    effect = "series_resistance"
+    summary = "an extra resistance in series with the source (leads, electrodes, amplifier output)"
+
+    def attach_points(self, system):
+        return [i.name for i in system.inputs if i.kind == "effort"]
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        j = system.input_names.index(where)
+        n = len(system.states)
+        out_rms = 0.0
+        # typical conjugate flow: rate of the charges driven by this input, else 1
+        for k in range(n):
+            if system.G[k, j] != 0 or system.P[k, j] != 0:
+                out_rms = max(out_rms, scales.get("rate", system.state_names[k], 0.0))
+        r_ref = scales.get("level", where, 1.0) / (out_rms or 1.0)
+        Ra = self.param("R_a", 0.02 * r_ref, "Ohm", f"series resistance at input {where}", _log_range(r_ref, 1e-5, 100.0))
+        s = _series_resistor_at_input(system, j, Ra.symbol, [Ra], self.effect)
+        return Augmentation(self.effect, where, "resistor R_a in series with the input", s, [Ra.name], {Ra.name: Ra.range}, [Ra.name])
+
+
+def _series_resistor_at_input(system, j: int, Ra: sp.Expr, params, effect):
+    n, m = len(system.states), len(system.inputs)
+    A = system.J - system.R
+    B = system.G - system.P
+    C = (system.G + system.P).T
+    D = system.S + system.N
+    E = sp.zeros(m, m)
+    E[j, j] = 1
+    M = (sp.eye(m) + Ra * E * D).inv()
+    M = M.applyfunc(sp.simplify)
+    A2 = A - Ra * B * M * E * C
+    B2 = B * M
+    C2 = C - Ra * D * M * E * C
+    D2 = D * M
+    J = (A2 - A2.T) / 2
+    R = -(A2 + A2.T) / 2
+    G = (B2 + C2.T) / 2
+    P = (C2.T - B2) / 2
+    S = (D2 + D2.T) / 2
+    N = (D2 - D2.T) / 2
+    simp = lambda X: X.applyfunc(sp.simplify)  # noqa: E731
+    z = _zsyms(n + m)
+    grad, u = sp.Matrix(z[:n]), sp.Matrix(z[n:])
+    u_old = M * (u - Ra * E * C * grad)
+    sub = {z[n + k]: u_old[k] for k in range(m)}
+    diss = [(lab, _entries(_power(ent, z).xreplace(sub), z)) for lab, ent in system.dissipators]
+    y = C * grad + D * u_old
+    diss.append((f"{effect}@{system.input_names[j]}", _entries(Ra * y[j] ** 2, z)))
+    return _rebuild(system, J=simp(J), R=simp(R), G=simp(G), P=simp(P), S=simp(S), N=simp(N), params=params,
+                    dissipators=diss, effect=effect)
+
+
+# -- measured-output candidates ---------------------------------------------------------------------------------
+class Offset(Candidate):
+    """A constant offset on a measured output (sensor zero error): ``y_m → y_m + c``."""
+
+    effect = "offset"
+    summary = "a constant offset of the sensor reading"
+    kind = "measured"
+
+    def attach_points(self, system):
+        return list(system.measured_names)
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        k = system.measured_names.index(where)
+        mo = system.measured[k]
+        ref = max(scales.get("value", where, 1.0), 1e-12)
+        c = self.param(f"{where}", 0.01 * ref, mo.unit, f"offset of the measured output {where}", (-100 * ref, 100 * ref))
+        measured = list(system.measured)
+        measured[k] = Measured(mo.name, mo.expr + c.symbol, mo.unit, mo.description)
+        s = _rebuild(system, measured=measured, params=[c], effect=self.effect)
+        return Augmentation(self.effect, where, "constant added to the reading", s, [c.name], {c.name: c.range}, [])
+
+
+# -- input elements ------------------------------------------------------------------------------------------------
+class InputElement(Candidate):
+    """An element between the recorded input and the model's input (drive electronics, transport):
+    :meth:`transform` maps the sampled input with parameter values ``theta`` (one per entry of
+    :meth:`parameters`).  The model itself is unchanged."""
+
+    kind = "input"
+
+    def attach_points(self, system):
+        return list(system.input_names)
+
+    @abstractmethod
+    def parameters(self, t, u) -> list[tuple[str, float, float, float]]:
+        """``(name, start, lo, hi)`` per parameter, given the recorded input."""
+
+    @abstractmethod
+    def transform(self, t: np.ndarray, u: np.ndarray, theta) -> np.ndarray:
+        """The input the model receives."""
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        return Augmentation(self.effect, where, self.component, system, [], {}, [], {}, self)
+
+    component = ""
+
+
+class TimeDelay(InputElement):
+    """A transport delay ``u(t − tau_d)`` (linear interpolation; the input holds its first value before 0)."""
+
+    effect = "time_delay"
+    summary = "a delay between the commanded input and the response"
+    component = "delay u(t − tau_d)"
+
+    def parameters(self, t, u):
+        T = float(t[-1] - t[0])
+        dt = float(np.median(np.diff(t)))
+        return [("tau_d", 5 * dt, 0.0, min(0.2 * T, 200 * dt))]
+
+    def transform(self, t, u, theta):
+        return np.interp(t - float(theta[0]), t, u)
+
+
+class InputSaturation(InputElement):
+    """A smooth saturation of the input ``U_sat tanh(u / U_sat)`` (amplifier or actuator limit)."""
+
+    effect = "input_saturation"
+    summary = "the input saturating at large amplitude (drive or actuator limit)"
+    component = "U_sat·tanh(u/U_sat)"
+
+    def parameters(self, t, u):
+        a = float(np.max(np.abs(u))) or 1.0
+        return [("U_sat", 3.0 * a, 0.2 * a, 20.0 * a)]
+
+    def transform(self, t, u, theta):
+        s = float(theta[0])
+        return s * np.tanh(u / s)
+
+
+class SlewRateLimit(InputElement):
+    """A limit ``r`` on the rate of change of the input (amplifier slew rate): the model's input
+    follows the command at most at ``r`` units per second."""
+
+    effect = "slew_rate_limit"
+    summary = "the input rising no faster than a maximum rate (amplifier slew-rate limit)"
+    component = "rate limiter |du/dt| <= r"
+
+    def parameters(self, t, u):
+        span = float(np.ptp(u)) or 1.0
+        dt = float(np.median(np.diff(t)))
+        return [("r", span / (5 * dt), span / (t[-1] - t[0]), span / dt)]
+
+    def transform(self, t, u, theta):
+        r = float(theta[0])
+        out = np.empty_like(np.asarray(u, float))
+        out[0] = u[0]
+        dts = np.diff(t) * r
+        cur = float(u[0])
+        for k in range(1, len(u)):
+            step = u[k] - cur
+            lim = dts[k - 1]
+            cur += step if -lim <= step <= lim else (lim if step > 0 else -lim)
+            out[k] = cur
+        return out
+
+
+LIBRARY: tuple[Candidate, ...] = (
+    ChargeRetention(), Leakage(), SeriesResistance(), CoulombFriction(), ViscoelasticCreep(), CubicStiffness(),
+    Hysteresis(), QuadraticDrag(), AddedMass(), InputSaturation(), SlewRateLimit(), TimeDelay(), Offset(),
+)
+"""The built-in candidates, one per effect name."""
+
+EFFECTS: tuple[str, ...] = tuple(c.effect for c in LIBRARY)
+
+__all__ = [
+    "Scales", "Augmentation", "Candidate", "InputElement", "LIBRARY", "EFFECTS", "momentum_states", "displacement_states",
+    "charge_states", "ChargeRetention", "Leakage", "SeriesResistance", "CoulombFriction", "ViscoelasticCreep",
+    "CubicStiffness", "Hysteresis", "QuadraticDrag", "AddedMass", "InputSaturation", "SlewRateLimit", "TimeDelay", "Offset",
+]
