@@ -1,0 +1,216 @@
+"""``phs passivity``: the passivity certificate of a model from a terminal.
+
+    phs passivity MODEL [--box NAME=LO:HI ...] [--equilibrium NAME=VALUE ...] [--x0 NAME=VALUE ...]
+                  [--input EXPR_OR_CSV ...] [--t-end T --dt DT] [--samples N] [--starts N] [--seed N]
+                  [--param NAME=VALUE ...] [--time COLUMN] [--map COLUMN=SIGNAL ...] [--json FILE] [--report DIR]
+
+prints the certificate (:func:`codegen.passivity.certify`) and exits with 0 when the model is certified
+passive, 1 when it is not, and 2 on an error naming the bad option (nothing is written then).
+
+Examples
+--------
+>>> from phs.workflows.cli import main
+>>> main(["passivity", "systems.examples:rc_circuit", "--param", "R.R=-1000", "--samples", "32", "--starts", "1"])  # doctest: +ELLIPSIS
+Passivity of 'rc' (model ...): NOT CERTIFIED PASSIVE; margin -2
+...
+1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+
+from phs.errors import InputDataError
+from phs.io import write_atomic
+from phs.workflows.inputs import input_signals, parse_assignments, read_input_csv
+from phs.workflows.loader import load_model
+
+
+def add_subcommand(sub) -> None:
+    """Add the ``passivity`` subparser to the ``phs`` command line.
+
+    Examples
+    --------
+    >>> from phs.workflows.cli import build_parser
+    >>> args = build_parser().parse_args(["passivity", "systems.examples:rc_circuit", "--box", "C.Q=-1e-6:1e-6"])
+    >>> args.box, args.samples
+    (['C.Q=-1e-6:1e-6'], 2000)
+    """
+    from phs.workflows.cli import _add_model_options, _positive
+
+    p = sub.add_parser(
+        "passivity", help="certify that a model is passive over a box of states and parameters",
+        description="Certify MODEL passive: J skew, [[R, P], [P^T, S]] positive semidefinite over the box "
+                    "(symbolic where decidable, else sampled and optimised with the worst point), H bounded below; "
+                    "optionally the dissipation inequality along a simulation (--input) and the passivity indices "
+                    "of the linearisation at an equilibrium (--equilibrium).  Exit status 0: passive, 1: not "
+                    "certified passive, 2: error.")
+    _add_model_options(p)
+    p.add_argument("--box", action="append", default=[], metavar="NAME=LO:HI",
+                   help="bounds of a state (default: its declared range) or of a parameter to vary (NAME alone: "
+                        "the parameter's declared range)")
+    p.add_argument("--equilibrium", action="append", default=[], metavar="NAME=VALUE",
+                   help="add the local test at an equilibrium: input values (the equilibrium is solved for) and/or "
+                        "state values (checked to be an equilibrium)")
+    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE",
+                   help="start of the equilibrium solver and initial state of the simulation")
+    p.add_argument("--input", action="append", default=[], metavar="EXPR_OR_CSV",
+                   help="add the dissipation inequality along a simulation with this input: FILE.csv (a recording's "
+                        "inputs; its time grid unless --t-end), NAME=EXPR or EXPR")
+    p.add_argument("--t-end", type=_positive("--t-end"), metavar="T", help="final time of the simulation [s]")
+    p.add_argument("--dt", type=_positive("--dt"), metavar="DT", help="output step of the simulation [s]")
+    p.add_argument("--samples", type=_positive("--samples", integer=True), default=2000, metavar="N",
+                   help="points of the dense sample of the box (default 2000)")
+    p.add_argument("--starts", type=_nonnegative_int, default=8, metavar="N",
+                   help="starts of each nlpsol minimisation (default 8)")
+    p.add_argument("--seed", type=_nonnegative_int, default=0, metavar="N", help="seed of the sample (default 0)")
+    p.add_argument("--report", metavar="DIR", help="write DIR/report.html (with plots), report.json, report.txt, *.png")
+    p.set_defaults(run=run_passivity)
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a nonnegative integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a nonnegative integer, got {text!r}")
+    return v
+
+
+def parse_box(items, system) -> dict:
+    """Parse ``--box NAME=LO:HI`` (or ``NAME`` for a parameter's declared range) into ``{name: (lo, hi)}``.
+
+    Raises
+    ------
+    InputDataError
+        Naming the item: malformed bounds, non-finite values, lower > upper, an unknown name, a name given twice.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> parse_box(["C.Q=-1e-6:2e-6", "R.R"], rc_circuit())
+    {'C.Q': (-1e-06, 2e-06), 'R.R': None}
+    >>> parse_box(["C.Q=1:0"], rc_circuit())
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: --box C.Q=1:0: lower bound 1 > upper bound 0
+    """
+    out: dict = {}
+    for item in items or ():
+        name, sep, value = str(item).partition("=")
+        name = name.strip()
+        if name in out:
+            raise InputDataError(f"--box: {name!r} is given twice")
+        if name not in system.state_names and name not in system.param_names:
+            raise InputDataError(f"--box {item}: system {system.name!r} has no state or parameter {name!r} "
+                                 f"(states: {', '.join(system.state_names)})")
+        if not sep:
+            if name in system.state_names:
+                raise InputDataError(f"--box {item}: give the bounds of state {name!r} as {name}=LO:HI")
+            out[name] = None
+            continue
+        lo, colon, hi = value.partition(":")
+        try:
+            a, b = float(lo), float(hi)
+        except ValueError:
+            a = b = None
+        if not colon or a is None:
+            raise InputDataError(f"--box {item}: expected NAME=LO:HI with numbers, e.g. {name}=-0.1:0.1")
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise InputDataError(f"--box {item}: bounds must be finite")
+        if a > b:
+            raise InputDataError(f"--box {item}: lower bound {a:g} > upper bound {b:g}")
+        out[name] = (a, b)
+    return out
+
+
+def _equilibrium_spec(items, system):
+    """(claimed states, inputs) from ``--equilibrium NAME=VALUE`` items."""
+    values = parse_assignments(items, "--equilibrium", numeric=True)
+    states, inputs = {}, {}
+    for name, v in values.items():
+        if name in system.state_names:
+            states[name] = v
+        elif name in system.input_names:
+            inputs[name] = v
+        else:
+            raise InputDataError(f"--equilibrium {name}={v:g}: system {system.name!r} has no state or input {name!r} "
+                                 f"(inputs: {', '.join(system.input_names) or 'none'}; states: "
+                                 f"{', '.join(system.state_names)})")
+    return states, inputs
+
+
+def _trajectory(args, system, x0: dict):
+    """``{"t", "u", "x0"}`` for the trajectory test, or None without --input / --t-end."""
+    import numpy as np
+
+    if not args.input and args.t_end is None:
+        if args.dt is not None:
+            raise InputDataError("--dt needs --t-end (or an --input CSV file giving the time grid)")
+        return None
+    mapping = parse_assignments(args.map, "--map")
+    csvs = [s for s in args.input if str(s).strip().lower().endswith(".csv")]
+    if args.t_end is not None:
+        if args.dt is None:
+            raise InputDataError("--t-end needs --dt (the output step of the simulation)")
+        if args.dt > args.t_end:
+            raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
+        if args.t_end / args.dt > 1e7:
+            raise InputDataError(f"--t-end / --dt gives {args.t_end / args.dt:.3g} samples; at most 1e7 are allowed")
+        t = np.arange(0.0, args.t_end + args.dt / 2, args.dt)
+    elif csvs:
+        t, _ = read_input_csv(csvs[0], system, args.time, mapping)
+    else:
+        raise InputDataError("--input with an expression needs --t-end and --dt")
+    u = input_signals(system, args.input, time_column=args.time, mapping=mapping, span=(t[0], t[-1]))
+    return {"t": t, "u": u, "x0": x0 or None}
+
+
+def run_passivity(args: argparse.Namespace) -> int:
+    """Run ``phs passivity`` with parsed arguments; returns 0 (passive), 1 (not certified passive).
+
+    Every check runs and every output is rendered before the first file is written, so an error writes
+    nothing.
+    """
+    from phs.workflows.cli import _check_writable
+
+    _check_writable(args.json)
+    if args.report is not None:
+        if os.path.exists(args.report) and not os.path.isdir(args.report):
+            raise InputDataError(f"--report {args.report!r} exists and is not a directory")
+        _check_writable(os.path.join(args.report, "report.html") if os.path.isdir(args.report) else args.report)
+    params = parse_assignments(args.param, "--param", numeric=True)
+    x0 = parse_assignments(args.x0, "--x0", numeric=True)
+    system = load_model(args.model)  # --param values are the certificate's overrides: a negative resistance is
+    system.param_vector(params)      # reported as a failure, not refused (unknown names raise ParameterError)
+    unknown = [k for k in x0 if k not in system.state_names]
+    if unknown:
+        raise InputDataError(f"--x0: system {system.name!r} has no state {unknown[0]!r} "
+                             f"(states: {', '.join(system.state_names)})")
+    box = parse_box(args.box, system)
+    states, inputs = _equilibrium_spec(args.equilibrium, system)
+    trajectory = _trajectory(args, system, x0)
+
+    from codegen.passivity import certify  # imported here: casadi is only needed once a model runs
+
+    equilibrium = (states or True) if args.equilibrium else None
+    report = certify(system, box=box, params=params or None, equilibrium=equilibrium, u=inputs or None, x0=x0 or None,
+                     trajectory=trajectory, samples=args.samples, starts=args.starts, seed=args.seed)
+    text = report.text()
+    document = None
+    if args.json:
+        import phs
+
+        doc = report.to_dict()
+        doc.update({"command": "passivity", "model": args.model, "phs_version": phs.__version__})
+        document = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    print(text)
+    if args.report is not None:
+        report.write_report(args.report)
+    if document is not None:
+        write_atomic(args.json, document)
+    return 0 if report.passive else 1
