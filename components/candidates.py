@@ -231,6 +231,30 @@ def _position_partner(system, p_name: str) -> str | None:
     return None
 
 
+def with_groups(names: list[str]) -> list[str]:
+    """Attach points from state names: repeated parts of identical segments (``s1.Q2``, ``s2.Q2``)
+    become one ``*.Q2`` entry (the effect on all of them, with one set of parameters, as the segments
+    share their parameters); other names stay as they are.
+
+    Examples
+    --------
+    >>> with_groups(["s1.Q2", "s2.Q2", "Q"])
+    ['Q', '*.Q2']
+    """
+    suffix = {}
+    for n in names:
+        if "." in n:
+            suffix.setdefault(n.split(".", 1)[1], []).append(n)
+    grouped = {n for v in suffix.values() if len(v) > 1 for n in v}
+    return [n for n in names if n not in grouped] + [f"*.{k}" for k, v in suffix.items() if len(v) > 1]
+
+
+def _members(system, where: str, names: list[str]) -> list[str]:
+    if where.startswith("*."):
+        return [n for n in names if "." in n and n.split(".", 1)[1] == where[2:]]
+    return [where]
+
+
 def _zsyms(n: int) -> list[sp.Symbol]:
     return [sp.Symbol(f"_z{i}", real=True) for i in range(n)]
 
@@ -316,8 +340,38 @@ def _log_range(ref: float, lo: float, hi: float) -> tuple[float, float]:
 
 
 # -- mechanical candidates ---------------------------------------------------------------------------------------
-class _AtMomentum(Candidate):
+class _AtStates(Candidate):
+    """A candidate attached to one state or, for ``*.suffix``, to every repeated one with shared
+    parameters.  Subclasses give ``states(system)``, ``new_params(system, first, scales)`` and
+    ``apply(system, member, params, scales) -> (system, {new state: initial value})``."""
+
+    component = ""
+
+    def states(self, system) -> list[str]:  # pragma: no cover - abstract in practice
+        raise NotImplementedError
+
     def attach_points(self, system) -> list[str]:
+        return with_groups(self.states(system))
+
+    def augment(self, system, where, scales):
+        self._check_where(system, where)
+        members = _members(system, where, self.states(system))
+        params = self.new_params(system, members[0], scales, where)
+        s, x0 = system, {}
+        for k, member in enumerate(members):
+            s, new = self.apply(s, member, params, scales, declare=(k == 0), tag="" if len(members) == 1 else member.split(".", 1)[0])
+            x0.update(new)
+        logs = [q.name for q in params if q.range[0] > 0 and q.range[1] / q.range[0] >= 100]
+        return Augmentation(self.effect, where, self.component, s, [q.name for q in params], {q.name: q.range for q in params},
+                            logs, x0)
+
+
+def _state_name(effect: str, local: str, tag: str) -> str:
+    return f"{effect}.{tag}.{local}" if tag else f"{effect}.{local}"
+
+
+class _AtMomentum(_AtStates):
+    def states(self, system) -> list[str]:
         return momentum_states(system)
 
     def _refs(self, system, where, scales):
@@ -331,24 +385,31 @@ class _AtMomentum(Candidate):
         x_ref = scales.get("value", q, 1.0) if q else v_ref * scales.duration
         return i, v, v_ref, f_ref, x_ref, q
 
+    def _unit(self, system, member) -> str:
+        """Unit of the body's displacement (m, or rad for a rotating body)."""
+        q = _position_partner(system, member)
+        return _unit_of(system, q) if q else ("rad" if _same_dimension(_unit_of(system, member), ("kg*m**2/s",)) else "m")
+
 
 class CoulombFriction(_AtMomentum):
     """Smooth, passive Coulomb friction on a body: force ``-F_c v / sqrt(v² + v_s²)``.
 
-    A dissipation ``R[p, p] += F_c / sqrt(v² + v_s²) ≥ 0`` with ``v = ∂H/∂p``; ``v_s`` is 5 % of the
+    A dissipation ``R[p, p] += F_c / sqrt(v² + v_s²) ≥ 0`` with ``v = ∂H/∂p``; ``v_s`` is 2 % of the
     typical velocity (fixed)."""
 
     effect = "coulomb_friction"
     summary = "a velocity-independent friction force opposing motion (Coulomb/dry friction)"
+    component = "smooth Coulomb friction F_c·v/sqrt(v²+v_s²)"
 
-    def augment(self, system, where, scales):
-        self._check_where(system, where)
-        i, v, v_ref, f_ref, _, _ = self._refs(system, where, scales)
-        F = self.param("F_c", 0.02 * f_ref, "N", f"Coulomb friction force on {where}", _log_range(f_ref, 1e-4, 10.0))
-        coef = F.symbol / _smooth_abs(v, 0.05 * v_ref)
-        s = _add_damping(system, i, coef, f"{self.effect}@{where}", [F], self.effect)
-        return Augmentation(self.effect, where, "smooth Coulomb friction F_c·v/sqrt(v²+v_s²)", s, [F.name],
-                            {F.name: F.range}, [F.name])
+    def new_params(self, system, first, scales, where):
+        _, _, _, f_ref, _, _ = self._refs(system, first, scales)
+        return [self.param("F_c", 0.02 * f_ref, f"J/({self._unit(system, first)})",
+                           f"Coulomb friction force on {where}", _log_range(f_ref, 1e-4, 10.0))]
+
+    def apply(self, system, member, params, scales, declare, tag):
+        i, v, v_ref, _, _, _ = self._refs(system, member, scales)
+        coef = params[0].symbol / _smooth_abs(v, 0.02 * v_ref)
+        return _add_damping(system, i, coef, f"{self.effect}@{member}", params if declare else [], self.effect), {}
 
 
 class QuadraticDrag(_AtMomentum):
@@ -356,14 +417,33 @@ class QuadraticDrag(_AtMomentum):
 
     effect = "quadratic_drag"
     summary = "a drag force growing with the square of velocity (fluid drag)"
+    component = "quadratic drag c_d·|v|·v"
 
-    def augment(self, system, where, scales):
-        self._check_where(system, where)
-        i, v, v_ref, f_ref, _, _ = self._refs(system, where, scales)
+    def new_params(self, system, first, scales, where):
+        _, _, v_ref, f_ref, _, _ = self._refs(system, first, scales)
         ref = f_ref / v_ref**2
-        c = self.param("c_d", 0.02 * ref, "N*s**2/m**2", f"quadratic drag coefficient on {where}", _log_range(ref, 1e-5, 100.0))
-        s = _add_damping(system, i, c.symbol * _smooth_abs(v, 0.02 * v_ref), f"{self.effect}@{where}", [c], self.effect)
-        return Augmentation(self.effect, where, "quadratic drag c_d·|v|·v", s, [c.name], {c.name: c.range}, [c.name])
+        return [self.param("c_d", 0.02 * ref, f"J*s**2/({self._unit(system, first)})**3",
+                           f"quadratic drag coefficient on {where}", _log_range(ref, 1e-5, 100.0))]
+
+    def apply(self, system, member, params, scales, declare, tag):
+        i, v, v_ref, _, _, _ = self._refs(system, member, scales)
+        coef = params[0].symbol * _smooth_abs(v, 0.02 * v_ref)
+        return _add_damping(system, i, coef, f"{self.effect}@{member}", params if declare else [], self.effect), {}
+
+
+def _arm(system, member, effect, local, unit, x_scale, k_sym, r_coef, declare_params, description):
+    """A new displacement state on body ``member``: energy ``k z²/2``, ``ż = v − r_coef·k z`` and force
+    ``−k z`` on the body (``J[z, p] = 1``, ``R[z, z] = r_coef``)."""
+    i = system.state_names.index(member)
+    st = StateInfo(local, unit, (-100 * x_scale, 100 * x_scale), description, "C", x_scale, effect)
+    n = len(system.states)
+    Jx = sp.zeros(n + 1, n + 1)
+    Jx[n, i], Jx[i, n] = 1, -1
+    Rx = sp.zeros(n + 1, n + 1)
+    Rx[n, n] = r_coef
+    s = _add_states(system, [st], [EnergyTerm(f"{effect}@{member}", k_sym * st.symbol**2 / 2)], Jx, Rx, declare_params,
+                    [(f"{effect}@{member}", {(n, n): r_coef})], effect)
+    return s, {local: 0.0}
 
 
 class ViscoelasticCreep(_AtMomentum):
@@ -375,27 +455,21 @@ class ViscoelasticCreep(_AtMomentum):
 
     effect = "viscoelastic_creep"
     summary = "a slow creep/relaxation of the structure after each load change (viscoelasticity)"
+    component = "Maxwell arm (spring k_m in series with damper k_m·tau) to ground"
 
-    def augment(self, system, where, scales):
-        self._check_where(system, where)
-        i, v, v_ref, f_ref, x_ref, q = self._refs(system, where, scales)
+    def new_params(self, system, first, scales, where):
+        _, _, _, f_ref, x_ref, _ = self._refs(system, first, scales)
         k_ref = f_ref / x_ref
         tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
-        k = self.param("k_m", 0.1 * k_ref, "N/m", f"stiffness of the creep arm on {where}", _log_range(k_ref, 1e-4, 100.0))
-        tau = self.param("tau", tau0, "s", "creep time constant", (5 * scales.dt, 10 * scales.duration))
-        name = f"{self.effect}.delta"
-        unit = _unit_of(system, q) if q else "m"
-        st = StateInfo(name, unit, (-10 * x_ref, 10 * x_ref), f"deflection of the creep arm on {where}", "C", x_ref, self.effect)
-        d = st.symbol
-        n = len(system.states)
-        Jx = sp.zeros(n + 1, n + 1)
-        Jx[n, i], Jx[i, n] = 1, -1
-        Rx = sp.zeros(n + 1, n + 1)
-        Rx[n, n] = 1 / (k.symbol * tau.symbol)
-        s = _add_states(system, [st], [EnergyTerm(self.effect, k.symbol * d**2 / 2)], Jx, Rx, [k, tau],
-                        [(f"{self.effect}@{where}", {(n, n): 1 / (k.symbol * tau.symbol)})], self.effect)
-        return Augmentation(self.effect, where, "Maxwell arm (spring k_m in series with damper k_m·tau) to ground", s,
-                            [k.name, tau.name], {k.name: k.range, tau.name: tau.range}, [k.name, tau.name], {name: 0.0})
+        return [self.param("k_m", 0.1 * k_ref, f"J/({self._unit(system, first)})**2",
+                           f"stiffness of the creep arm on {where}", _log_range(k_ref, 1e-4, 100.0)),
+                self.param("tau", tau0, "s", "creep time constant", (5 * scales.dt, 10 * scales.duration))]
+
+    def apply(self, system, member, params, scales, declare, tag):
+        _, _, _, _, x_ref, q = self._refs(system, member, scales)
+        k, tau = params
+        return _arm(system, member, self.effect, _state_name(self.effect, "delta", tag), self._unit(system, member), x_ref, k.symbol,
+                    1 / (k.symbol * tau.symbol), params if declare else [], f"deflection of the creep arm on {member}")
 
 
 class Hysteresis(_AtMomentum):
@@ -407,27 +481,21 @@ class Hysteresis(_AtMomentum):
 
     effect = "hysteresis"
     summary = "a rate-independent hysteresis loop in force vs. displacement (Dahl/Duhem friction, plasticity)"
+    component = "Dahl hysteresis (k_h z²/2, ż = v − |v| k_h z / F_h)"
 
-    def augment(self, system, where, scales):
-        self._check_where(system, where)
-        i, v, v_ref, f_ref, x_ref, q = self._refs(system, where, scales)
+    def new_params(self, system, first, scales, where):
+        _, _, _, f_ref, x_ref, _ = self._refs(system, first, scales)
         k_ref = f_ref / x_ref
-        k = self.param("k_h", 2.0 * k_ref, "N/m", f"pre-sliding stiffness of the hysteresis on {where}", _log_range(k_ref, 1e-3, 1e3))
-        F = self.param("F_h", 0.05 * f_ref, "N", f"saturation force of the hysteresis on {where}", _log_range(f_ref, 1e-4, 10.0))
-        name = f"{self.effect}.z"
-        unit = _unit_of(system, q) if q else "m"
-        st = StateInfo(name, unit, (-100 * x_ref, 100 * x_ref), f"pre-sliding deflection on {where}", "C", 0.05 * x_ref, self.effect)
-        z = st.symbol
-        n = len(system.states)
-        Jx = sp.zeros(n + 1, n + 1)
-        Jx[n, i], Jx[i, n] = 1, -1
-        Rx = sp.zeros(n + 1, n + 1)
-        coef = _smooth_abs(v, 1e-3 * v_ref) / F.symbol
-        Rx[n, n] = coef
-        s = _add_states(system, [st], [EnergyTerm(self.effect, k.symbol * z**2 / 2)], Jx, Rx, [k, F],
-                        [(f"{self.effect}@{where}", {(n, n): coef})], self.effect)
-        return Augmentation(self.effect, where, "Dahl hysteresis (k_h z²/2, ż = v − |v| k_h z / F_h)", s,
-                            [k.name, F.name], {k.name: k.range, F.name: F.range}, [k.name, F.name], {name: 0.0})
+        return [self.param("k_h", 2.0 * k_ref, f"J/({self._unit(system, first)})**2",
+                           f"pre-sliding stiffness of the hysteresis on {where}", _log_range(k_ref, 1e-3, 1e3)),
+                self.param("F_h", 0.05 * f_ref, f"J/({self._unit(system, first)})",
+                           f"saturation force of the hysteresis on {where}", _log_range(f_ref, 1e-4, 10.0))]
+
+    def apply(self, system, member, params, scales, declare, tag):
+        _, v, v_ref, _, x_ref, q = self._refs(system, member, scales)
+        k, F = params
+        return _arm(system, member, self.effect, _state_name(self.effect, "z", tag), self._unit(system, member), 0.05 * x_ref, k.symbol,
+                    _smooth_abs(v, 1e-3 * v_ref) / F.symbol, params if declare else [], f"pre-sliding deflection on {member}")
 
 
 class AddedMass(_AtMomentum):
@@ -436,39 +504,40 @@ class AddedMass(_AtMomentum):
 
     effect = "added_mass"
     summary = "more inertia than modelled (added/entrained mass)"
+    component = "inertia scaled by (1 + mu)"
 
-    def augment(self, system, where, scales):
-        self._check_where(system, where)
-        mu = self.param("mu", 0.05, "1", f"added mass as a fraction of the inertia of {where}", (1e-3, 20.0))
-        p = system.states[system.state_names.index(where)].symbol
-        sub = {p: p / sp.sqrt(1 + mu.symbol)}
+    def new_params(self, system, first, scales, where):
+        return [self.param("mu", 0.05, "1", f"added mass as a fraction of the inertia of {where}", (1e-3, 20.0))]
+
+    def apply(self, system, member, params, scales, declare, tag):
+        p = system.states[system.state_names.index(member)].symbol
+        sub = {p: p / sp.sqrt(1 + params[0].symbol)}
         H = [EnergyTerm(t.label, t.expr.subs(sub)) for t in system.energy_terms]
-        s = _rebuild(system, H=H, params=[mu], effect=self.effect)
-        return Augmentation(self.effect, where, "inertia scaled by (1 + mu)", s, [mu.name], {mu.name: mu.range}, [mu.name])
+        return _rebuild(system, H=H, params=params if declare else [], effect=self.effect), {}
 
 
-class CubicStiffness(Candidate):
+class CubicStiffness(_AtStates):
     """A hardening (or softening) spring term ``H += k3 q⁴/4``: a force ``k3 q³`` (Duffing).  It starts
     at 5 % of ``k_ref/q_ref²`` (typical stiffness and displacement along the nominal fit) and may
     go down to -0.3 of that (softening, bounded so H stays bounded below over the typical range)."""
 
     effect = "cubic_stiffness"
     summary = "a stiffness that changes with deflection (cubic, Duffing-type spring)"
+    component = "quartic spring energy k3·q⁴/4"
 
-    def attach_points(self, system):
+    def states(self, system):
         return displacement_states(system)
 
-    def augment(self, system, where, scales):
-        self._check_where(system, where)
-        q_ref = scales.get("level", where, 1.0)
-        k_ref = scales.get("coenergy", where, 1.0) / q_ref
-        ref = k_ref / q_ref**2
-        unit = _unit_of(system, where)
-        k3 = self.param("k3", 0.05 * ref, f"J/({unit})**4", f"cubic stiffness coefficient of {where}", (-0.3 * ref, 100 * ref))
-        q = system.states[system.state_names.index(where)].symbol
-        s = _rebuild(system, H=list(system.energy_terms) + [EnergyTerm(f"{self.effect}@{where}", k3.symbol * q**4 / 4)],
-                     params=[k3], effect=self.effect)
-        return Augmentation(self.effect, where, "quartic spring energy k3·q⁴/4", s, [k3.name], {k3.name: k3.range}, [])
+    def new_params(self, system, first, scales, where):
+        q_ref = scales.get("level", first, 1.0)
+        ref = scales.get("coenergy", first, 1.0) / q_ref**3
+        unit = _unit_of(system, first)
+        return [self.param("k3", 0.05 * ref, f"J/({unit})**4", f"cubic stiffness coefficient of {where}", (-0.3 * ref, 100 * ref))]
+
+    def apply(self, system, member, params, scales, declare, tag):
+        q = system.states[system.state_names.index(member)].symbol
+        H = list(system.energy_terms) + [EnergyTerm(f"{self.effect}@{member}", params[0].symbol * q**4 / 4)]
+        return _rebuild(system, H=H, params=params if declare else [], effect=self.effect), {}
 
 
 # -- electrical candidates ------------------------------------------------------------------------------------
@@ -479,14 +548,16 @@ class Leakage(Candidate):
     summary = "charge leaking through the dielectric (a conductance across the capacitor)"
 
     def attach_points(self, system):
-        return charge_states(system)
+        return with_groups(charge_states(system))
 
     def augment(self, system, where, scales):
         self._check_where(system, where)
-        i = system.state_names.index(where)
-        g_ref = scales.get("rate", where, 1.0) / scales.get("coenergy", where, 1.0)
+        members = _members(system, where, charge_states(system))
+        g_ref = scales.get("rate", members[0], 1.0) / scales.get("coenergy", members[0], 1.0)
         G = self.param("G_l", 0.02 * g_ref, "S", f"leakage conductance across {where}", _log_range(g_ref, 1e-5, 100.0))
-        s = _add_damping(system, i, G.symbol, f"{self.effect}@{where}", [G], self.effect)
+        s = system
+        for k, name in enumerate(members):
+            s = _add_damping(s, s.state_names.index(name), G.symbol, f"{self.effect}@{name}", [G] if k == 0 else [], self.effect)
         return Augmentation(self.effect, where, "conductance G_l across the capacitor", s, [G.name], {G.name: G.range}, [G.name])
 
 
@@ -501,21 +572,27 @@ class ChargeRetention(Candidate):
     summary = "a slow charge drift in the dielectric after each voltage change (charge retention, RC branch)"
 
     def attach_points(self, system):
-        return charge_states(system)
+        return with_groups(charge_states(system))
 
     def augment(self, system, where, scales):
         self._check_where(system, where)
-        c_ref = scales.get("level", where, 1.0) / scales.get("coenergy", where, 1.0)
+        members = _members(system, where, charge_states(system))
+        first = members[0]
+        c_ref = scales.get("level", first, 1.0) / scales.get("coenergy", first, 1.0)
         tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
         C = self.param("C_r", 20 * c_ref, "F", f"retention capacitance in series with {where}", _log_range(c_ref, 0.1, 1e4))
         tau = self.param("tau", tau0, "s", "retention time constant R_r·C_r", (5 * scales.dt, 10 * scales.duration))
-        name = f"{self.effect}.Q"
-        q_ref = scales.get("level", where, 1.0)
-        st = StateInfo(name, "C", (-100 * q_ref, 100 * q_ref), f"charge of the retention branch at {where}", "C", q_ref, self.effect)
-        s = _series_with_storage(system, where, st, st.symbol**2 / (2 * C.symbol), 1 / (tau.symbol / C.symbol), [C, tau],
-                                 self.effect)
+        q_ref = scales.get("level", first, 1.0)
+        s, x0 = system, {}
+        for k, member in enumerate(members):
+            name = f"{self.effect}.Q" if len(members) == 1 else f"{self.effect}.{member.split('.', 1)[0]}.Q"
+            st = StateInfo(name, "C", (-100 * q_ref, 100 * q_ref), f"charge of the retention branch at {member}", "C", q_ref,
+                           self.effect)
+            s = _series_with_storage(s, member, st, st.symbol**2 / (2 * C.symbol), 1 / (tau.symbol / C.symbol),
+                                     [C, tau] if k == 0 else [], self.effect)
+            x0[name] = 0.0
         return Augmentation(self.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the capacitor", s,
-                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], {name: 0.0})
+                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], x0)
 
 
 def _series_with_storage(system, where, state: StateInfo, energy: sp.Expr, conductance: sp.Expr, params, effect):
@@ -537,7 +614,7 @@ def _series_with_storage(system, where, state: StateInfo, energy: sp.Expr, condu
     sub[z_old[i]] = z_new[i] + z_new[n]
     diss = [(lab, _entries(_power(ent, z_old).xreplace(sub), z_new)) for lab, ent in system.dissipators]
     diss.append((f"{effect}@{where}", {(n, n): conductance}))
-    return _rebuild(system, states=tuple(system.states) + (state,), H=list(system.energy_terms) + [EnergyTerm(effect, energy)],
+    return _rebuild(system, states=tuple(system.states) + (state,), H=list(system.energy_terms) + [EnergyTerm(f"{effect}@{where}", energy)],
                     J=J, R=R, G=G, P=P, params=params, dissipators=diss, effect=effect)
 
 
@@ -716,6 +793,6 @@ EFFECTS: tuple[str, ...] = tuple(c.effect for c in LIBRARY)
 
 __all__ = [
     "Scales", "Augmentation", "Candidate", "InputElement", "LIBRARY", "EFFECTS", "momentum_states", "displacement_states",
-    "charge_states", "ChargeRetention", "Leakage", "SeriesResistance", "CoulombFriction", "ViscoelasticCreep",
+    "charge_states", "with_groups", "ChargeRetention", "Leakage", "SeriesResistance", "CoulombFriction", "ViscoelasticCreep",
     "CubicStiffness", "Hysteresis", "QuadraticDrag", "AddedMass", "InputSaturation", "SlewRateLimit", "TimeDelay", "Offset",
 ]

@@ -89,10 +89,12 @@ def shell(prefix: str, P, S, *, inertia: bool = True, theta_scale: float = 0.2, 
     return comps, [mech, series(f"{prefix}.d.b", f"{prefix}.K")], A_s, th
 
 
-def electrode_branch(prefix: str, shell_areas, map_angle, P, S, *, q2_scale: float = 2e-6):
+def electrode_branch(prefix: str, shell_areas, map_angle, P, S, *, q2_scale: float = 2e-6, drift: bool = True):
     """Electrical part: volume conservation for the zipped length, the electrode capacitor C2(l_e)
     with R2 across it, the charge-retention branch C1 || R1 in series, R0, and the input map
     ``gamma1 cos(gamma2 angle)`` as a modulated transformer from the source port ``{prefix}.ga.a``.
+
+    Without ``drift`` the retention branch is left out (``R0 -> (C2 || R2)``).
 
     Returns ``(components, connections, l_e)``.
 
@@ -114,7 +116,7 @@ def electrode_branch(prefix: str, shell_areas, map_angle, P, S, *, q2_scale: flo
                         ("input map gamma1 cos(gamma2 theta) keeps its sign (|gamma2 theta| <= pi/2)",
                          sp.cos(S("gamma2") * map_angle))],
         ),
-        DriftBranch(f"{prefix}.D", C1=P("C1"), R1=P("R1"), state=f"{prefix}.Q1", range=(-0.1, 0.1)),
+        *([DriftBranch(f"{prefix}.D", C1=P("C1"), R1=P("R1"), state=f"{prefix}.Q1", range=(-0.1, 0.1))] if drift else []),
         VariableCapacitor(
             f"{prefix}.C2", C=S("eps0") * S("eps_r") * S("w") * (l_e / (2 * tf) + (Le - l_e) / (2 * tf + Xh)),
             C_typical=4e-10, state=f"{prefix}.Q2", scale=q2_scale,
@@ -125,5 +127,6 @@ def electrode_branch(prefix: str, shell_areas, map_angle, P, S, *, q2_scale: flo
         Transformer(f"{prefix}.ga", 1 / (S("gamma1") * sp.cos(S("gamma2") * map_angle)),
                     domains=("electrical", "electrical")),
     ]
-    conns = [series(f"{prefix}.ga.b", f"{prefix}.R0", f"{prefix}.D", parallel(f"{prefix}.C2", f"{prefix}.R2"))]
+    chain = [f"{prefix}.ga.b", f"{prefix}.R0"] + ([f"{prefix}.D"] if drift else [])
+    conns = [series(*chain, parallel(f"{prefix}.C2", f"{prefix}.R2"))]
     return comps, conns, l_e

@@ -83,7 +83,8 @@ def default_parameters() -> dict[str, Param]:
     return {p.name: p for p in P}
 
 
-def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: bool = True, untie=(), **overrides):
+def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: bool = True, drift: bool = True, untie=(),
+                  **overrides):
     """Curling HASEL with ``n_segments`` segments sharing one voltage source.
 
     Parameters
@@ -94,6 +95,9 @@ def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: boo
         Per-segment inertia ``I_s`` (eq. 15) or the serial-chain M(theta) of eq. 12.
     gravity : bool
         Include the gravitational potential of the links.
+    drift : bool
+        Include the charge-retention branch ``C1 || R1`` of each segment (without it: the model of
+        the paper before the drift was explained; ``C1``, ``R1`` and the states ``seg{i}.Q1`` go away).
     untie : sequence of str
         Shared parameters to declare per segment (``seg{i}.K_b``) instead of once.
     **overrides : float
@@ -130,7 +134,7 @@ def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: boo
         return P(name, i).symbol
 
     comps, conns = [VoltageSource("U", range=(-10e3, 10e3))], []
-    shared = [q for k, q in base.items() if k not in untie]
+    shared = [q for k, q in base.items() if k not in untie and (drift or k not in ("C1", "R1"))]
     a = base["L_v"].symbol + base["L_e"].symbol  # link length
     thetas = [symbol_of_state(f"seg{i}.theta") for i in range(1, n_segments + 1)]
     ga_ports = []
@@ -139,7 +143,7 @@ def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: boo
         parts, (mech, top), A_s, th = shell(f"seg{i}", Pi, Si, inertia=(inertia == "segment"))
         if inertia == "chain":
             mech.insert(1, f"chain.p{i}")
-        elec, econns, _ = electrode_branch(f"seg{i}", [A_s], th, Pi, Si)
+        elec, econns, _ = electrode_branch(f"seg{i}", [A_s], th, Pi, Si, drift=drift)
         comps += parts + elec
         conns += [series(*mech), top] + econns
         ga_ports.append(f"seg{i}.ga.a")

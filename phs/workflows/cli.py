@@ -36,9 +36,9 @@ EXIT_ERROR = 2
 # Subcommands defined in their workflow's own module: each has ``add_subcommand(sub)``, which adds
 # its parser and sets ``run`` (a function of the parsed arguments returning the exit code).
 _SUBCOMMAND_MODULES: tuple[str, ...] = (
-    # passivity
+    "phs.workflows.passivity_cli",
     # control
-    # diagnose
+    "phs.workflows.diagnose.cli",
     # sweep
 )
 
@@ -209,6 +209,16 @@ def _add_fit(sub) -> None:
     _add_model_options(p)
     p.add_argument("data", metavar="DATA", help="CSV recording: a time column, the model's inputs and measured outputs")
     p.add_argument("--free", required=True, metavar="NAME,NAME", help="parameters to fit (comma-separated)")
+    add_recording_options(p)
+    p.add_argument("--report", metavar="DIR", help="write DIR/fit.png, DIR/sensitivity.md and DIR/summary.txt")
+    p.add_argument("--max-iter", type=_positive("--max-iter", integer=True), default=100, metavar="N",
+                   help="maximum number of residual evaluations (default 100)")
+    p.add_argument("--quiet", action="store_true", help="do not print the optimiser's progress on stderr")
+    p.set_defaults(run=run_fit)
+
+
+def add_recording_options(p: argparse.ArgumentParser) -> None:
+    """Options of the subcommands that fit a model to a recording (``fit``, ``diagnose``)."""
     p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
     p.add_argument("--scale", action="append", default=[], metavar="COLUMN=FROM:TO",
                    help="convert a column's unit (pos=mm:m, volt=kV:V) or multiply it by a factor (COLUMN=FACTOR)")
@@ -217,11 +227,6 @@ def _add_fit(sub) -> None:
     p.add_argument("--outputs", metavar="NAME,NAME",
                    help="measured outputs to fit (default: every one the recording provides)")
     p.add_argument("--validate", metavar="DATA2", help="second CSV recording scored with the fitted model")
-    p.add_argument("--report", metavar="DIR", help="write DIR/fit.png, DIR/sensitivity.md and DIR/summary.txt")
-    p.add_argument("--max-iter", type=_positive("--max-iter", integer=True), default=100, metavar="N",
-                   help="maximum number of residual evaluations (default 100)")
-    p.add_argument("--quiet", action="store_true", help="do not print the optimiser's progress on stderr")
-    p.set_defaults(run=run_fit)
 
 
 def _name_list(text: str | None, option: str) -> list[str]:
@@ -317,18 +322,10 @@ def _read_recording(path: str, system, args, mapping: dict, scales: dict, output
         raise InputDataError(str(exc).replace("pass resample=DT", "pass --resample DT")) from None
 
 
-def run_fit(args: argparse.Namespace) -> int:
-    """Run ``phs fit`` with parsed arguments; returns the exit code.
-
-    Every check, the fit, the validation, the sensitivity table and every output (figure,
-    markdown, summary, JSON) are prepared in memory before the first file is written, so an
-    error writes nothing.
-    """
-    _check_writable(args.json)
-    if args.report is not None:
-        if os.path.exists(args.report) and not os.path.isdir(args.report):
-            raise InputDataError(f"--report {args.report!r} exists and is not a directory")
-        _check_writable(os.path.join(args.report, "summary.txt") if os.path.isdir(args.report) else args.report)
+def model_and_recordings(args: argparse.Namespace):
+    """Load the model and the recordings of a fitting subcommand (``fit``, ``diagnose``), checking every
+    name given on the command line first.  Returns ``(system, recording, validation or None, free,
+    fitted outputs, x0)``."""
     params = parse_assignments(args.param, "--param", numeric=True)
     x0 = parse_assignments(args.x0, "--x0", numeric=True)
     mapping = parse_assignments(args.map, "--map")
@@ -364,6 +361,22 @@ def run_fit(args: argparse.Namespace) -> int:
     if args.validate is not None:
         val = _read_recording(args.validate, system, args, mapping, scales, fitted_outputs)
         val.check_for(system, fitted_outputs)
+    return system, rec, val, free, fitted_outputs, x0
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    """Run ``phs fit`` with parsed arguments; returns the exit code.
+
+    Every check, the fit, the validation, the sensitivity table and every output (figure,
+    markdown, summary, JSON) are prepared in memory before the first file is written, so an
+    error writes nothing.
+    """
+    _check_writable(args.json)
+    if args.report is not None:
+        if os.path.exists(args.report) and not os.path.isdir(args.report):
+            raise InputDataError(f"--report {args.report!r} exists and is not a directory")
+        _check_writable(os.path.join(args.report, "summary.txt") if os.path.isdir(args.report) else args.report)
+    system, rec, val, free, fitted_outputs, x0 = model_and_recordings(args)
 
     from phs.workflows.identify import identify  # imported here: casadi is only needed once a model runs
 

@@ -1,0 +1,74 @@
+"""The ``phs diagnose`` subcommand."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+from phs.errors import InputDataError
+from phs.io import write_atomic
+
+
+def add_subcommand(sub) -> None:
+    """Add ``phs diagnose`` to the subparsers ``sub``.
+
+    Examples
+    --------
+    >>> from phs.workflows.cli import build_parser
+    >>> args = build_parser().parse_args(["diagnose", "systems.examples:rc_circuit", "data.csv", "--free", "R.R"])
+    >>> args.free, args.max_effects
+    ('R.R', 2)
+    """
+    from phs.workflows.cli import _add_model_options, _positive, add_recording_options
+
+    p = sub.add_parser(
+        "diagnose", help="find where a model misses a recording, which physics is missing, and the fixed model",
+        description="Fit MODEL to DATA, locate where the residual concentrates, fit every candidate effect of the "
+                    "library attached to the model, and say which physics the model left out (or none), with the "
+                    "fit before and after.  Writes a JSON (--json) and an HTML report (--report DIR).")
+    _add_model_options(p)
+    p.add_argument("data", metavar="DATA", help="CSV recording: a time column, the model's inputs and measured outputs")
+    p.add_argument("--free", metavar="NAME,NAME",
+                   help="nominal parameters refitted with every hypothesis (default: those with a declared range, at most 8)")
+    add_recording_options(p)
+    p.add_argument("--report", metavar="DIR", help="write DIR/index.html, figures, diagnosis.json and summary.txt")
+    p.add_argument("--effects", metavar="NAME,NAME", help="only these candidate effects (default: the whole library)")
+    p.add_argument("--max-effects", type=_positive("--max-effects", integer=True), default=2, metavar="N",
+                   help="accept at most N effects one after the other (default 2)")
+    p.add_argument("--jobs", type=_positive("--jobs", integer=True), metavar="N",
+                   help="processes fitting hypotheses in parallel (default: CPUs, at most 4)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(run=run_diagnose)
+
+
+def run_diagnose(args: argparse.Namespace) -> int:
+    """Run ``phs diagnose``; every output is prepared before the first file is written."""
+    from components.candidates import LIBRARY
+    from phs.workflows.cli import _check_writable, _name_list, model_and_recordings
+
+    _check_writable(args.json)
+    if args.report is not None:
+        if os.path.exists(args.report) and not os.path.isdir(args.report):
+            raise InputDataError(f"--report {args.report!r} exists and is not a directory")
+        _check_writable(os.path.join(args.report, "index.html") if os.path.isdir(args.report) else args.report)
+    names = _name_list(args.effects, "--effects")
+    known = [c.effect for c in LIBRARY]
+    bad = [n for n in names if n not in known]
+    if bad:
+        raise InputDataError(f"--effects: unknown effect {bad[0]!r}; known: {', '.join(known)}")
+    candidates = [c for c in LIBRARY if c.effect in names] if names else None
+    system, rec, val, free, outputs, x0 = model_and_recordings(args)
+
+    from phs.workflows.diagnose import diagnose
+    from phs.workflows.diagnose.report import to_json
+
+    d = diagnose(system, rec, validation=val, free=free or None, outputs=outputs, candidates=candidates, x0=x0 or None,
+                 max_effects=args.max_effects, n_jobs=args.jobs, progress=not args.quiet)
+    text = d.summary()
+    document = to_json(d) if args.json else None
+    print(text)
+    if args.report is not None:
+        d.write_report(args.report)
+    if document is not None:
+        write_atomic(args.json, document)
+    return 0

@@ -1,0 +1,222 @@
+"""Words, figures and files of a diagnosis: the explanation, the HTML report and the JSON."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import os
+
+import numpy as np
+
+from phs.io import write_atomic
+
+# which located findings speak for which effect (used to say where an effect showed)
+_EVIDENCE = {
+    "charge_retention": ("drift", "time_window"),
+    "leakage": ("drift", "feature"),
+    "series_resistance": ("time_window", "input_lag"),
+    "coulomb_friction": ("feature", "harmonic"),
+    "viscoelastic_creep": ("drift", "time_window"),
+    "cubic_stiffness": ("feature", "amplitude_scaling", "harmonic"),
+    "hysteresis": ("feature", "harmonic"),
+    "quadratic_drag": ("feature", "rate_scaling"),
+    "added_mass": ("spectrum", "time_window"),
+    "input_saturation": ("amplitude_scaling", "feature"),
+    "slew_rate_limit": ("time_window", "input_lag"),
+    "time_delay": ("input_lag", "time_window"),
+    "offset": ("feature", "drift"),
+}
+
+
+def _fmt_params(values: dict) -> str:
+    return ", ".join(f"{k.split('.', 1)[-1]} = {v:.3g}" for k, v in values.items())
+
+
+def _fits(nominal, h, outs) -> str:
+    parts = []
+    for ch in outs:
+        parts.append(f"{ch} {nominal.fit_percent[ch]:.1f} → {h.fit_percent[ch]:.1f} % (training), "
+                     f"{nominal.validation_fit_percent[ch]:.1f} → {h.validation_fit_percent[ch]:.1f} % (validation)")
+    return "; ".join(parts)
+
+
+def explanation(nominal, accepted, findings, rival, outs) -> str:
+    """Plain-language verdict (see :func:`phs.diagnose`)."""
+    if not accepted:
+        if rival is None:
+            return "No candidate could be fitted; the nominal model stands."
+        from phs.workflows.diagnose import _delta_bic, _gain
+
+        g = _gain(nominal, rival)
+        white = [f for f in findings if f.kind == "whiteness"]
+        tail = (" The residual " + ("looks white" if all(f.details.get("p_value", 0) > 0.01 for f in white) else "keeps some structure")
+                + " (" + "; ".join(f"{f.channel}: {f.where}" for f in white) + ").") if white else ""
+        return (f"No missing physics found: no candidate improves the fit beyond what noise explains. The best, "
+                f"{rival.augmentation.effect} at {rival.augmentation.attached_to}, changes the validation residual by "
+                f"{100 * g:+.1f} % with ΔBIC {_delta_bic(nominal, rival):+.1f} (thresholds: −1 % and −10).{tail}")
+    from components.candidates import LIBRARY
+
+    summaries = {c.effect: c.summary for c in LIBRARY}
+    out = []
+    for k, h in enumerate(accepted):
+        aug = h.augmentation
+        what = summaries.get(aug.effect, type(aug).__name__)
+        ev = [f for f in findings if f.kind in _EVIDENCE.get(aug.effect, ())][:2]
+        where = "; ".join(f"{f.channel}: {f.where}" for f in ev)
+        params = _fmt_params({**{p: h.values[p] for p in aug.free if p in h.values}, **h.element_values})
+        lead = "Missing physics" if k == 0 else "A second effect"
+        out.append(f"{lead}: {what} — {aug.effect} at {aug.attached_to} ({aug.component}; {params})."
+                   + (f" It showed as {where}." if where else "")
+                   + f" Fit: {_fits(nominal if k == 0 else accepted[k - 1], h, outs)}.")
+    if rival is not None:
+        from phs.workflows.diagnose import _gain
+
+        g = _gain(nominal, rival)
+        out.append(f"Next best explanation: {rival.augmentation.effect} at {rival.augmentation.attached_to} "
+                   f"(validation residual {100 * g:+.1f} %).")
+    return " ".join(out)
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def figure_fits(d) -> bytes:
+    """Measured vs nominal vs final model on the validation data, and residuals before/after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = d.data
+    t = np.asarray(data.validation.t)
+    mask = data.val_mask
+    fig, axes = plt.subplots(2 * len(d.outputs), 1, figsize=(9, 2.4 * 2 * len(d.outputs)), sharex=True, squeeze=False)
+    for k, ch in enumerate(d.outputs):
+        y = np.asarray(data.validation[ch])
+        yn = np.asarray(d.nominal.simulated["validation"][ch])
+        yf = np.asarray(d.final.simulated["validation"][ch])
+        ax = axes[2 * k, 0]
+        ax.plot(t[mask], y[mask], lw=0.8, color="0.4", label="measured")
+        ax.plot(t[mask], yn[mask], lw=1, label=f"nominal ({d.nominal.validation_fit_percent[ch]:.1f} %)")
+        ax.plot(t[mask], yf[mask], lw=1, label=f"{d.verdict['effect']} ({d.final.validation_fit_percent[ch]:.1f} %)")
+        ax.set_ylabel(ch)
+        ax.legend(fontsize=7, loc="upper right")
+        ax = axes[2 * k + 1, 0]
+        ax.plot(t[mask], (y - yn)[mask], lw=0.7, label="residual, nominal")
+        ax.plot(t[mask], (y - yf)[mask], lw=0.7, label="residual, final")
+        ax.set_ylabel(f"{ch} residual")
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("t [s] (validation)")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def figure_hypotheses(d) -> bytes:
+    """Validation gain and ΔBIC of every hypothesis."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    hs = [h for h in d.hypotheses if h.ok]
+    fig, ax = plt.subplots(figsize=(8, 0.3 * max(len(hs), 4) + 1))
+    gains = [100 * (d.nominal.validation_rss - h.validation_rss) / d.nominal.validation_rss for h in hs]
+    colors = ["tab:green" if any(h is a for a in d.accepted) else "tab:gray" for h in hs]
+    ax.barh([h.label for h in hs][::-1], gains[::-1], color=colors[::-1])
+    ax.axvline(100 * 0.01, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("validation residual decrease [%] (dashed: acceptance threshold)")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def figure_locate(d) -> bytes | None:
+    from phs.workflows.diagnose import _features
+    from phs.workflows.diagnose import locate as loc
+
+    if not hasattr(loc, "plot_findings"):
+        return None
+    feats, inputs = _features(d.nominal, d.system, d.data)
+    buf = io.BytesIO()
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        p = os.path.join(tmp, "locate.png")
+        loc.plot_findings(d.data.recording.t, d.nominal.residuals, feats, inputs, d.findings, p)
+        with open(p, "rb") as fh:
+            buf.write(fh.read())
+    return buf.getvalue()
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def to_json(d) -> str:
+    """The diagnosis as JSON text (non-finite numbers become null)."""
+    def clean(o):
+        if isinstance(o, dict):
+            return {str(k): clean(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [clean(v) for v in o]
+        if isinstance(o, (float, np.floating)):
+            return float(o) if math.isfinite(o) else None
+        return o
+
+    return json.dumps(clean(d.to_dict()), indent=2, default=_json_default)
+
+
+def write_report(d, directory) -> None:
+    """``index.html`` (figures embedded), ``fits.png``, ``hypotheses.png``, ``locate.png``,
+    ``diagnosis.json`` and ``summary.txt`` in ``directory`` (created if missing; each file atomic)."""
+    directory = os.fspath(directory)
+    figs = {"fits.png": figure_fits(d), "hypotheses.png": figure_hypotheses(d)}
+    loc = figure_locate(d)
+    if loc:
+        figs["locate.png"] = loc
+    text = d.summary()
+    js = to_json(d)
+    checks = d.structure_checks()
+    page = ["<!doctype html><meta charset='utf-8'><title>Diagnosis of " + html.escape(d.system.name) + "</title>",
+            "<style>body{font-family:sans-serif;max-width:1000px;margin:2em auto}td,th{padding:2px 8px}"
+            "table{border-collapse:collapse}tr:nth-child(even){background:#f4f4f4}</style>",
+            f"<h1>Diagnosis of {html.escape(d.system.name)}</h1>",
+            f"<p><b>Verdict: {html.escape(d.verdict['effect'])}</b> (confidence {d.verdict['confidence']:.2f})</p>",
+            f"<p>{html.escape(d.verdict['explanation'])}</p>",
+            "<h2>Fit before and after</h2><table><tr><th>channel</th><th>nominal training</th><th>nominal validation</th>"
+            "<th>final training</th><th>final validation</th></tr>"]
+    for ch in d.outputs:
+        page.append(f"<tr><td>{html.escape(ch)}</td><td>{d.nominal.fit_percent[ch]:.2f} %</td>"
+                    f"<td>{d.nominal.validation_fit_percent[ch]:.2f} %</td><td>{d.final.fit_percent[ch]:.2f} %</td>"
+                    f"<td>{d.final.validation_fit_percent[ch]:.2f} %</td></tr>")
+    page.append("</table>")
+    page.append(f"<h2>Final model</h2><p>structural checks: {'all passed (passive)' if checks['ok'] else 'FAILED'}</p>"
+                f"<pre>{html.escape(checks['report'])}</pre>")
+    for name, title in (("fits.png", "Measured, nominal and final (validation)"), ("locate.png", "Where the nominal model misses"),
+                        ("hypotheses.png", "Hypotheses")):
+        if name in figs:
+            b64 = base64.b64encode(figs[name]).decode()
+            page.append(f"<h2>{title}</h2><img src='data:image/png;base64,{b64}' style='max-width:100%'>")
+    page.append("<h2>Located mismatch</h2><table><tr><th>kind</th><th>channel</th><th>where</th><th>strength</th><th>meaning</th></tr>")
+    for f in d.findings:
+        page.append(f"<tr><td>{html.escape(f.kind)}</td><td>{html.escape(f.channel)}</td><td>{html.escape(f.where)}</td>"
+                    f"<td>{f.strength:.4g}</td><td>{html.escape(f.meaning)}</td></tr>")
+    page.append("</table><h2>Summary</h2><pre>" + html.escape(text) + "</pre>")
+    os.makedirs(directory, exist_ok=True)
+    for name, data in figs.items():
+        write_atomic(os.path.join(directory, name), data)
+    write_atomic(os.path.join(directory, "diagnosis.json"), js)
+    write_atomic(os.path.join(directory, "summary.txt"), text + "\n")
+    write_atomic(os.path.join(directory, "index.html"), "\n".join(page))
