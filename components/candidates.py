@@ -143,6 +143,9 @@ class Augmentation:
     log_scale: list
     x0: dict = field(default_factory=dict)
     element: InputElement | None = None
+    starts: tuple = ()
+    """Alternative starting values ({parameter: value}) tried when screening, for parameters whose
+    plausible values span decades (a retention capacitance, a time constant)."""
 
     @property
     def n_params(self) -> int:
@@ -363,7 +366,11 @@ class _AtStates(Candidate):
             x0.update(new)
         logs = [q.name for q in params if q.range[0] > 0 and q.range[1] / q.range[0] >= 100]
         return Augmentation(self.effect, where, self.component, s, [q.name for q in params], {q.name: q.range for q in params},
-                            logs, x0)
+                            logs, x0, starts=tuple(self.starts(params, scales)))
+
+    def starts(self, params, scales) -> list[dict]:
+        """Alternative starting values tried when screening (none by default)."""
+        return []
 
 
 def _state_name(effect: str, local: str, tag: str) -> str:
@@ -465,6 +472,10 @@ class ViscoelasticCreep(_AtMomentum):
                            f"stiffness of the creep arm on {where}", _log_range(k_ref, 1e-4, 100.0)),
                 self.param("tau", tau0, "s", "creep time constant", (5 * scales.dt, 10 * scales.duration))]
 
+    def starts(self, params, scales):
+        k, tau = params
+        return [{tau.name: min(10 * tau.value, 0.9 * tau.range[1])}, {tau.name: max(0.1 * tau.value, 1.1 * tau.range[0])}]
+
     def apply(self, system, member, params, scales, declare, tag):
         _, _, _, _, x_ref, q = self._refs(system, member, scales)
         k, tau = params
@@ -473,29 +484,43 @@ class ViscoelasticCreep(_AtMomentum):
 
 
 class Hysteresis(_AtMomentum):
-    """Rate-independent hysteresis in passive Dahl/Duhem form.
+    """Rate-independent hysteresis in passive Bouc-Wen/Duhem form (exponent 1).
 
-    New state ``z`` (elastic pre-sliding deflection), ``H += k_h z²/2``, ``ż = v − |v| z/z_s``: the
-    element's force ``k_h z`` saturates at ``F_h = k_h z_s`` and traces loops whose shape does not
-    depend on the rate.  PH form: ``J[z, p] = 1``, ``R[z, z] = |v| / F_h ≥ 0``."""
+    New state ``z`` (elastic pre-sliding deflection), ``H += k_h z²/2``, element force ``k_h z`` on the
+    body, and ``ż = (1 − eta k_h |z| / F_h) v − |v| k_h z / F_h``: loops whose shape does not depend on
+    the rate, saturating near ``F_h``; ``eta`` skews them (Bouc-Wen's ``δ/γ``; ``eta = 0`` is Dahl's
+    model).  PH form: ``J[z, p] = 1 − eta k_h |z| / F_h`` (skew with ``J[p, z]``), ``R[z, z] = |v| / F_h ≥ 0``."""
 
     effect = "hysteresis"
-    summary = "a rate-independent hysteresis loop in force vs. displacement (Dahl/Duhem friction, plasticity)"
-    component = "Dahl hysteresis (k_h z²/2, ż = v − |v| k_h z / F_h)"
+    summary = "a rate-independent hysteresis loop in force vs. displacement (Dahl/Bouc-Wen friction, plasticity)"
+    component = "Bouc-Wen/Dahl hysteresis (k_h z²/2, ż = (1 − eta k_h|z|/F_h) v − |v| k_h z / F_h)"
 
     def new_params(self, system, first, scales, where):
         _, _, _, f_ref, x_ref, _ = self._refs(system, first, scales)
         k_ref = f_ref / x_ref
-        return [self.param("k_h", 2.0 * k_ref, f"J/({self._unit(system, first)})**2",
-                           f"pre-sliding stiffness of the hysteresis on {where}", _log_range(k_ref, 1e-3, 1e3)),
-                self.param("F_h", 0.05 * f_ref, f"J/({self._unit(system, first)})",
-                           f"saturation force of the hysteresis on {where}", _log_range(f_ref, 1e-4, 10.0))]
+        unit = self._unit(system, first)
+        return [self.param("k_h", 2.0 * k_ref, f"J/({unit})**2", f"pre-sliding stiffness of the hysteresis on {where}",
+                           _log_range(k_ref, 1e-3, 1e3)),
+                self.param("F_h", 0.05 * f_ref, f"J/({unit})", f"saturation force of the hysteresis on {where}",
+                           _log_range(f_ref, 1e-4, 10.0)),
+                self.param("eta", -0.2, "1", "asymmetry of loading and unloading (0: Dahl)", (-3.0, 0.9))]
+
+    def starts(self, params, scales):
+        k, F, _ = params  # a strong element (comparable to the spring's force), soft and stiff
+        return [{k.name: 0.25 * k.value, F.name: 10 * F.value}, {k.name: 2.5 * k.value, F.name: 10 * F.value}]
 
     def apply(self, system, member, params, scales, declare, tag):
-        _, v, v_ref, _, x_ref, q = self._refs(system, member, scales)
-        k, F = params
-        return _arm(system, member, self.effect, _state_name(self.effect, "z", tag), self._unit(system, member), 0.05 * x_ref, k.symbol,
-                    _smooth_abs(v, 1e-3 * v_ref) / F.symbol, params if declare else [], f"pre-sliding deflection on {member}")
+        i, v, v_ref, _, x_ref, q = self._refs(system, member, scales)
+        k, F, eta = params
+        local = _state_name(self.effect, "z", tag)
+        s, x0 = _arm(system, member, self.effect, local, self._unit(system, member), 0.05 * x_ref, k.symbol,
+                     _smooth_abs(v, 1e-3 * v_ref) / F.symbol, params if declare else [], f"pre-sliding deflection on {member}")
+        z = s.states[-1].symbol
+        n = len(s.states) - 1
+        J = sp.Matrix(s.J)
+        c = 1 - eta.symbol * k.symbol * _smooth_abs(z, 1e-3 * x_ref) / F.symbol
+        J[n, i], J[i, n] = c, -c
+        return _rebuild(s, J=J, params=[]), x0
 
 
 class AddedMass(_AtMomentum):
@@ -580,7 +605,7 @@ class ChargeRetention(Candidate):
         first = members[0]
         c_ref = scales.get("level", first, 1.0) / scales.get("coenergy", first, 1.0)
         tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
-        C = self.param("C_r", 20 * c_ref, "F", f"retention capacitance in series with {where}", _log_range(c_ref, 0.1, 1e4))
+        C = self.param("C_r", 20 * c_ref, "F", f"retention capacitance in series with {where}", _log_range(c_ref, 0.1, 1e7))
         tau = self.param("tau", tau0, "s", "retention time constant R_r·C_r", (5 * scales.dt, 10 * scales.duration))
         q_ref = scales.get("level", first, 1.0)
         s, x0 = system, {}
@@ -591,8 +616,9 @@ class ChargeRetention(Candidate):
             s = _series_with_storage(s, member, st, st.symbol**2 / (2 * C.symbol), 1 / (tau.symbol / C.symbol),
                                      [C, tau] if k == 0 else [], self.effect)
             x0[name] = 0.0
+        starts = tuple({C.name: f * c_ref, tau.name: tt} for f in (1e3, 1e5) for tt in (tau0, min(10 * tau0, tau.range[1] * 0.9)))
         return Augmentation(self.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the capacitor", s,
-                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], x0)
+                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], x0, starts=starts)
 
 
 def _series_with_storage(system, where, state: StateInfo, energy: sp.Expr, conductance: sp.Expr, params, effect):
@@ -741,24 +767,34 @@ class TimeDelay(InputElement):
 
 
 class InputSaturation(InputElement):
-    """A smooth saturation of the input ``U_sat tanh(u / U_sat)`` (amplifier or actuator limit)."""
+    """A saturation of the input at ``U_hi`` above and ``-U_lo`` below (possibly asymmetric), with
+    corners rounded over 5 % of the input's peak: ``u − sp(u − U_hi) + sp(−u − U_lo)``, ``sp`` the
+    softplus.  The limits are searched below the recorded peaks (a limit above them has no effect)."""
 
     effect = "input_saturation"
     summary = "the input saturating at large amplitude (drive or actuator limit)"
-    component = "U_sat·tanh(u/U_sat)"
+    component = "soft clip of u to [-U_lo, U_hi]"
 
     def parameters(self, t, u):
-        a = float(np.max(np.abs(u))) or 1.0
-        return [("U_sat", 3.0 * a, 0.2 * a, 20.0 * a)]
+        hi = float(np.max(u)) if np.max(u) > 0 else float(np.max(np.abs(u))) or 1.0
+        lo = float(-np.min(u)) if np.min(u) < 0 else float(np.max(np.abs(u))) or 1.0
+        return [("U_hi", 1.05 * hi, 0.2 * hi, 1.05 * hi), ("U_lo", 1.05 * lo, 0.2 * lo, 1.05 * lo)]
 
     def transform(self, t, u, theta):
-        s = float(theta[0])
-        return s * np.tanh(u / s)
+        u = np.asarray(u, float)
+        w = 0.05 * (float(np.max(np.abs(u))) or 1.0)
+
+        def sp_(x):
+            return w * np.logaddexp(0.0, x / w)
+
+        hi, lo = float(theta[0]), float(theta[1])
+        return u - sp_(u - hi) + sp_(-u - lo)
 
 
 class SlewRateLimit(InputElement):
     """A limit ``r`` on the rate of change of the input (amplifier slew rate): the model's input
-    follows the command at most at ``r`` units per second."""
+    follows the command at most at ``r`` units per second.  Searched between the rate that would
+    take the whole recording to cross the input's span and the command's own steepest slope."""
 
     effect = "slew_rate_limit"
     summary = "the input rising no faster than a maximum rate (amplifier slew-rate limit)"
@@ -766,8 +802,9 @@ class SlewRateLimit(InputElement):
 
     def parameters(self, t, u):
         span = float(np.ptp(u)) or 1.0
-        dt = float(np.median(np.diff(t)))
-        return [("r", span / (5 * dt), span / (t[-1] - t[0]), span / dt)]
+        steepest = float(np.max(np.abs(np.diff(u) / np.diff(t)))) or span / float(t[-1] - t[0])
+        lo = min(span / float(t[-1] - t[0]), 0.5 * steepest)
+        return [("r", steepest, lo, steepest)]
 
     def transform(self, t, u, theta):
         r = float(theta[0])

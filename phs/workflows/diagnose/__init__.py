@@ -204,8 +204,8 @@ def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
 
 
 def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top):
-    """Screen every hypothesis by fitting only its own parameters (the current model's held at their
-    fit), then refit the ``refit_top`` most promising jointly with the nominal free parameters."""
+    """Screen every hypothesis by a loose joint fit (few iterations, input elements by their search alone),
+    then refit the ``refit_top`` most promising to convergence."""
     if refit_top <= 0 or len(augs) <= refit_top:
         return _run_all(current, augs, data, n_jobs, progress, label)
     screened = _run_all(current, augs, data, n_jobs, progress, label + " screening", joint=False)
@@ -215,7 +215,8 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top):
     for h in top:
         aug = h.augmentation
         if aug.element is None:
-            aug = replace(aug, system=aug.system.with_params({k: v for k, v in h.values.items() if k in aug.system.param_names}))
+            aug = replace(aug, system=aug.system.with_params({k: v for k, v in h.values.items() if k in aug.system.param_names}),
+                          starts=())
         refits.append(aug)
     full = _run_all(current, refits, data, n_jobs, progress, label + " joint refit")
     done = {(f.augmentation.effect, f.augmentation.attached_to) for f in full}
@@ -259,7 +260,7 @@ def _locate(scored, system, data, noise):
 
 def diagnose(system, recording, *, validation=None, free=None, outputs=None, candidates=None, x0=None, bounds=None,
              log_scale=None, max_effects: int = 2, n_jobs: int | None = None, progress: bool = False, rtol: float = 1e-7,
-             refit_top: int = 3) -> Diagnosis:
+             refit_top: int = 3, estimate_x0=()) -> Diagnosis:
     """Find where ``system`` and ``recording`` disagree, which physics is missing, and the fixed model.
 
     Parameters
@@ -279,6 +280,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         Default :data:`components.candidates.LIBRARY`; add your own :class:`components.candidates.Candidate`.
     x0 : dict, optional
         Initial state of the nominal model.
+    estimate_x0 : sequence of str
+        States whose initial values are estimated with the nominal fit (a recording that does not
+        start at rest); every hypothesis then starts from them.
     bounds, log_scale : optional
         Passed to :func:`phs.identify` for the nominal parameters.
     max_effects : int
@@ -286,9 +290,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     n_jobs : int, optional
         Processes fitting hypotheses in parallel (default: the number of CPUs, at most 4).
     refit_top : int
-        Every hypothesis is first fitted alone (its own parameters, the nominal ones held); the
-        ``refit_top`` most promising are then refitted jointly with the nominal free parameters
-        (0: every hypothesis is fitted jointly).
+        Every hypothesis is first screened by a loose fit (at most 10 evaluations); the ``refit_top``
+        most promising are then refitted to convergence (0: every hypothesis is fitted to convergence).
     progress : bool
         Print one line per fitted hypothesis on stderr.
 
@@ -332,11 +335,12 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if len(recording) < 40:
             raise InputDataError(f"{recording.source}: too short to split into training and validation ({len(recording)} samples)")
         train = recording.window(t[0], at)
-        data = Data(train, recording, t > at, t <= at, outs, free, dict(bounds or {}), list(log_scale or []), x0, rtol)
+        data = Data(train, recording, t > at, t <= at, outs, free, dict(bounds or {}), list(log_scale or []), x0, rtol,
+                    tuple(estimate_x0))
     else:
         validation.check_for(system, outs)
         data = Data(recording, validation, np.ones(len(validation), bool), None, outs, free, dict(bounds or {}),
-                    list(log_scale or []), x0, rtol)
+                    list(log_scale or []), x0, rtol, tuple(estimate_x0))
     noise = {ch: noise_level(recording[ch]) for ch in outs}
     cands = list(LIBRARY if candidates is None else candidates)
 

@@ -64,6 +64,7 @@ class Data:
     log_scale: list
     x0: dict | None
     rtol: float = 1e-7
+    estimate_x0: tuple = ()
 
     @property
     def n_train(self) -> int:
@@ -143,7 +144,7 @@ def score(label, system, values, x0, n_params, data: Data, *, augmentation=None,
 def fit_nominal(system, data: Data, progress=None) -> Scored:
     t0 = time.perf_counter()
     fit = identify(system, data.recording, data.free, bounds=data.bounds or None, x0=data.x0, outputs=data.outputs,
-                   log_scale=data.log_scale or None, rtol=data.rtol, max_iter=60)
+                   log_scale=data.log_scale or None, rtol=data.rtol, max_iter=60, estimate_x0=data.estimate_x0)
     return score("nominal", system, fit.values, fit.x0, len(data.free), data, seconds=time.perf_counter() - t0,
                  train_residuals=fit.residuals)
 
@@ -167,18 +168,34 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True) -> Score
         if aug.element is not None:
             return _fit_input_element(nominal, aug, data, t0, joint)
         system = aug.system.with_params({k: v for k, v in nominal.values.items() if k in aug.system.param_names})
-        free = (list(data.free) if joint else []) + list(aug.free)
+        # screening fits the nominal parameters too (a new element often takes over part of what they
+        # did: stiffness, damping), but loosely: it only has to rank the hypotheses
+        free = list(data.free) + list(aug.free)
         x0 = dict(zip(nominal.system.state_names, map(float, nominal.x0), strict=True))
         x0.update(aug.x0)
         bounds = {**(data.bounds or {}), **aug.bounds}
         # nominal parameters keep the nominal fit's log scaling; the new ones the candidate's choice
-        nominal_log = (list(data.log_scale) if data.log_scale else _default_log(system, data.free)) if joint else []
+        nominal_log = list(data.log_scale) if data.log_scale else _default_log(system, data.free)
         log_scale = nominal_log + list(aug.log_scale)
-        # screening needs the gain to a few per cent, not the optimum to eight digits
-        fit = identify(system, data.recording, free, bounds=bounds, x0=x0, outputs=data.outputs, log_scale=log_scale,
-                       rtol=data.rtol, max_iter=30 if joint else 12, ftol=1e-6 if joint else 1e-4)
-        return score(label, system, fit.values, fit.x0, len(data.free) + len(aug.free), data, augmentation=aug,
-                     seconds=time.perf_counter() - t0, train_residuals=fit.residuals)
+        # screening needs the gain to a few per cent, not the optimum to eight digits; parameters whose
+        # plausible values span decades are screened from each of the candidate's starts
+        best = None
+        for start in [{}] + [dict(st) for st in aug.starts]:
+            try:
+                fit = identify(system.with_params(start) if start else system, data.recording, free, bounds=bounds, x0=x0,
+                               outputs=data.outputs, log_scale=log_scale, rtol=data.rtol, max_iter=30 if joint else 10,
+                               ftol=1e-6 if joint else 1e-3)
+            except (PHSError, RuntimeError) as exc:
+                if best is None and start == {} and not aug.starts:
+                    raise
+                last_error = exc
+                continue
+            if best is None or fit.cost < best.cost:
+                best = fit
+        if best is None:
+            raise last_error
+        return score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
+                     seconds=time.perf_counter() - t0, train_residuals=best.residuals)
     except (PHSError, RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return Scored(label, aug.system, {}, nominal.x0, 0, {}, {}, math.inf, math.inf, math.inf, {}, {},
@@ -217,7 +234,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     theta = [s[1] for s in specs]
     for k, (_name, _start, lo, hi) in enumerate(specs):
         # coarse grid (log-spaced where the range is positive) then bounded refinement
-        grid = np.geomspace(max(lo, 1e-12 * hi), hi, 7) if lo >= 0 else np.linspace(lo, hi, 7)
+        grid = np.geomspace(max(lo, 1e-3 * hi), hi, 9) if lo >= 0 else np.linspace(lo, hi, 9)
         if lo == 0:
             grid = np.concatenate([[0.0], grid])
         vals = []
