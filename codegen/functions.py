@@ -58,6 +58,15 @@ class GeneratedFunctions:
 
 _CACHE: weakref.WeakKeyDictionary[PHSystem, GeneratedFunctions] = weakref.WeakKeyDictionary()
 _BY_HASH: weakref.WeakValueDictionary[str, GeneratedFunctions] = weakref.WeakValueDictionary()
+_HASHES: weakref.WeakKeyDictionary[PHSystem, str] = weakref.WeakKeyDictionary()
+
+
+def _model_hash(system: PHSystem) -> str:
+    """``system.model_hash()`` computed once per system object (hashing prints every expression)."""
+    h = _HASHES.get(system)
+    if h is None:
+        h = _HASHES[system] = system.model_hash()
+    return h
 
 
 def generate(system: PHSystem) -> GeneratedFunctions:
@@ -77,7 +86,7 @@ def generate(system: PHSystem) -> GeneratedFunctions:
         return hit
     # parameters are inputs of the functions: systems differing only in parameter values
     # (``with_params``) share them
-    key = system.model_hash()
+    key = _model_hash(system)
     hit = _BY_HASH.get(key)
     if hit is not None:
         _CACHE[system] = hit

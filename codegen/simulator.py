@@ -30,7 +30,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from codegen.functions import generate
+from codegen.functions import _model_hash, generate
 from codegen.results import SimulationResult
 from codegen.translate import Translator
 from phs.errors import DomainError, InputDataError, SimulationError
@@ -96,6 +96,9 @@ class Simulator:
         quadratures of the same run (default); False skips them.
     integrator_options : dict, optional
         Extra CVODES options passed to CasADi (e.g. ``{"second_order_correction": False}``).
+    compiler : callable, optional
+        ``compiler(fun, key) -> casadi.Function`` used instead of :func:`codegen.compile.compiled`
+        when ``compile`` is true (e.g. to put derivatives of the dynamics in the same library).
 
     Examples
     --------
@@ -108,7 +111,7 @@ class Simulator:
     """
 
     def __init__(self, system, rtol=1e-8, atol=None, max_steps=20000, compile=False, energy=True,
-                 integrator_options=None):
+                 integrator_options=None, compiler=None):
         self.system = system
         self.f = generate(system)
         if not (0 < rtol < 1) or (atol is not None and not atol > 0):
@@ -119,6 +122,7 @@ class Simulator:
         self.compile = bool(compile)
         self.energy = bool(energy)
         self.integrator_options = dict(integrator_options or {})
+        self.compiler = compiler
         self.scale = np.array([s.typical for s in system.states], dtype=float)
         self._integrators: dict = {}
         self._templates: dict = {}
@@ -251,9 +255,9 @@ class Simulator:
         if self.compile:
             from codegen.compile import compiled
 
-            dae = compiled(dae, f"{self.system.model_hash()}|{key[1:]}|{self.scale.tolist()}")
+            dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[1:]}|{self.scale.tolist()}")
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
-                "disable_internal_warnings": True}  # failures are reported as PHS errors instead
+                "disable_internal_warnings": True, "show_eval_warnings": False}  # failures are reported as PHS errors instead
         if any(g is not None for g in sampled):
             # a sampled input may change after a long constant stretch: never step over an output interval
             opts["max_step_size"] = 1.0

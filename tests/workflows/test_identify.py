@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+import phs.workflows.identify as ident
 from codegen import simulate
+from codegen.simulator import Simulator
 from phs import ParameterError
-from phs.errors import InputDataError
+from phs.errors import InputDataError, SimulationError
 from phs.signals import square, staircase
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
@@ -120,3 +122,82 @@ def test_multiple_shooting_recovers_the_same_parameters():
     assert fit.values["k.K"] == pytest.approx(4.0, rel=1e-5)
     assert fit.values["b.b"] == pytest.approx(0.1, rel=1e-4)
     assert fit.fit_percent["position"] > 99.99
+
+
+# -- the Jacobian: forward sensitivities against finite differences ------------------------------------------
+def _central_differences(prob, z, h):
+    cols = []
+    for j in range(len(z)):
+        e = np.zeros_like(z)
+        e[j] = h
+        cols.append((prob.res(z + e) - prob.res(z - e)) / (2 * h))
+    return np.column_stack(cols)
+
+
+def _column_errors(J, Jfd):
+    return np.linalg.norm(J - Jfd, axis=0) / np.linalg.norm(Jfd, axis=0)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_sensitivity_jacobian_matches_finite_differences(compiled):
+    if compiled and ident._c_compiler() is None:
+        pytest.skip("no C compiler")
+    s = curling_hasel(4)
+    t = np.arange(0, 0.3 + 5e-4, 1e-3)
+    U = staircase(-1000.0, every=0.1, n_steps=3)(t)  # two steps: three segments between the kinks
+    rec = _recording(s, t, U)
+    x0 = Simulator(s).initial_state(X0)
+    w = {ch: 1.0 / np.std(rec[ch]) for ch in ("tip", "current")}
+    prob = ident._Problem(s, rec, FREE, ["C1", "R2"], ["tip", "current"], w, x0, [], 1e-10, None, compile=compiled)
+    assert prob.compiled is compiled
+    z = np.array([1.1, 0.9, 1.05, 0.95, 0.1, -0.1])  # away from the truth, log coordinates for C1 and R2
+    r, J = prob.jac(z)
+    np.testing.assert_array_equal(r, prob.res(z))
+    # central differences with h = 1e-3 on coordinates of order 1: truncation ~h^2 ~ 1e-6; the
+    # residual's integration error divided by h gives <= 1e-4 relative on the weakest columns (C1 and
+    # R2 act through the slow drift: their columns are 30-300 times smaller; the error grows as 1/h
+    # for smaller h, so it is the differences', not the sensitivities').  1e-3 leaves a margin while
+    # a wrong seed, scaling or chain-rule term would be off by O(1)
+    err = _column_errors(J, _central_differences(prob, z, 1e-3))
+    assert np.all(err < 1e-3), dict(zip(FREE, err))
+
+
+def test_sensitivities_with_windows_and_initial_states_match_finite_differences():
+    """Multiple shooting (window start states as coordinates) and estimated initial states."""
+    s = mass_spring_damper().with_params({"k.K": 6.0, "b.b": 0.2})
+    t = np.linspace(0, 6, 601)
+    F = square(1.0, 0.25)(t)
+    rec = Recording.from_arrays(t, {"F": F, "position": np.sin(t)})
+    sim = Simulator(s)
+    prob = ident._Problem(s, rec, ["k.K", "b.b"], ["b.b"], ["position"], {"position": 1.0}, sim.initial_state(None),
+                          ["m.p"], 1e-10, None, shooting=3)
+    xs = simulate(s, t, u={"F": F}).x[prob.window_starts] / sim.scale
+    z = np.concatenate([[1.1, 0.1], [0.02], xs.reshape(-1) + 0.01])
+    r, J = prob.jac(z)
+    assert J.shape == (601 + 2 * 2, 2 + 1 + 2 * 2)  # outputs and defects; theta, x0, two window starts
+    # tolerance as above; the defect rows are linear in the window starts (exact up to rounding)
+    err = _column_errors(J, _central_differences(prob, z, 1e-3))
+    assert np.all(err < 1e-3), err
+
+
+def test_compiled_and_interpreted_fits_agree(monkeypatch):
+    if ident._c_compiler() is None:
+        pytest.skip("no C compiler")
+    truth = mass_spring_damper().with_params({"k.K": 5.0, "b.b": 0.7})
+    t = np.linspace(0, 10, 1001)
+    F = staircase(1.0, every=2.0, n_steps=4)(t)
+    rec = Recording.from_arrays(t, {"F": F, "position": simulate(truth, t, u={"F": F})["position"]})
+    fits = [identify(mass_spring_damper(), rec, ["k.K", "b.b"], compile=c) for c in (False, True)]
+    assert [f.compiled for f in fits] == [False, True]
+    # the same model evaluated by CasADi's virtual machine and by compiled C: the fitted values agree
+    # to the integration tolerance (rtol 1e-8), far inside the parameters' standard errors
+    for k in ("k.K", "b.b"):
+        assert fits[1].values[k] == pytest.approx(fits[0].values[k], rel=1e-6)
+    # the default compiles large fits (here: any fit) when a compiler is there, else runs interpreted;
+    # asking for compilation without a compiler says why it cannot
+    monkeypatch.setattr(ident, "_COMPILE_WORK", 0)
+    assert identify(mass_spring_damper(), rec, ["k.K"], max_iter=1).compiled
+    monkeypatch.setattr(ident, "_c_compiler", lambda: None)
+    assert not identify(mass_spring_damper(), rec, ["k.K"], max_iter=1).compiled
+    with pytest.raises(SimulationError, match="C compiler"):
+        identify(mass_spring_damper(), rec, ["k.K"], compile=True)
