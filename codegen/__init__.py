@@ -13,3 +13,4 @@ from codegen.simulator import Simulator, simulate, simulator
 
 __all__ = ["generate", "GeneratedFunctions", "simulator", "simulate", "Simulator", "SimulationResult",
            "discrete_gradient_simulate"]
+from codegen import idapbc  # noqa: E402,F401  (IDA-PBC controllers: idapbc.design)

@@ -37,7 +37,7 @@ EXIT_ERROR = 2
 # its parser and sets ``run`` (a function of the parsed arguments returning the exit code).
 _SUBCOMMAND_MODULES: tuple[str, ...] = (
     "phs.workflows.passivity_cli",
-    # control
+    "phs.workflows.control_cli",
     "phs.workflows.diagnose.cli",
     # sweep
 )

@@ -1,0 +1,238 @@
+"""``phs control``: design an IDA-PBC controller from a terminal.
+
+    phs control MODEL --target NAME=VALUE [...] [--input NAME ...] [--fixed NAME=VALUE ...] [--x0 NAME=VALUE ...]
+                [--neglect STATE,STATE] [--damping R | --damping STATE=D] [--stiffness STATE=K ...]
+                [--integral {passive,output}] [--integral-time T] [--t-end T] [--dt DT] [--plant-param NAME=VALUE ...]
+                [--rays N] [--simulations N] [--export-c DIR] [--param NAME=VALUE ...] [--json FILE] [--report DIR]
+
+assigns the equilibrium at which the targets hold (NAME is a state or a measured output: ``--target tip=0.03``),
+solves the matching equations, prints the design and its certificates
+(:mod:`codegen.idapbc`), and optionally simulates the closed loop (``--t-end``; the plant is the full model,
+with ``--plant-param`` overrides for a plant/controller mismatch), exports the law to C (``--export-c``) and
+writes a report directory (``controller.txt``, ``certificates.json``, ``closed_loop.png``, ``closed_loop.csv``).
+Exit status: 0 when every certificate passed, 1 when one failed, 2 on an error (an unreachable target
+included); nothing is written on an error.
+
+Examples
+--------
+>>> from phs.workflows.cli import main
+>>> main(["control", "systems.examples:mass_spring_damper", "--target", "position=0.5", "--stiffness", "k.l=6",
+...       "--damping", "2", "--rays", "8", "--simulations", "2"])  # doctest: +ELLIPSIS
+IDA-PBC controller for 'msd'
+...
+Certificates of the IDA-PBC controller for 'msd': all passed
+...
+0
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import os
+
+import numpy as np
+
+from phs.errors import InputDataError
+from phs.io import write_atomic
+from phs.workflows.inputs import parse_assignments
+from phs.workflows.loader import load_model
+
+
+def add_subcommand(sub) -> None:
+    """Add the ``control`` subparser to the ``phs`` command line.
+
+    Examples
+    --------
+    >>> from phs.workflows.cli import build_parser
+    >>> args = build_parser().parse_args(["control", "systems:curling_hasel", "--target", "tip=0.03"])
+    >>> args.target, args.integral
+    (['tip=0.03'], None)
+    """
+    from phs.workflows.cli import _add_model_options, _positive
+
+    p = sub.add_parser(
+        "control", help="design an IDA-PBC controller holding a model at a target, with certificates",
+        description="Design an IDA-PBC controller for MODEL that holds the targets (states or measured outputs), "
+                    "print the assigned equilibrium, the solved matching equations and the certificates (matching "
+                    "residual, J_d skew, R_d PSD, critical point, Hessian, closed-loop eigenvalues, region of "
+                    "attraction, closed-loop simulations).  Exit status 0: all certificates passed, 1: one failed, "
+                    "2: error (an unreachable target included).")
+    _add_model_options(p)
+    p.add_argument("--target", action="append", default=[], required=True, metavar="NAME=VALUE",
+                   help="value to hold a state or measured output at (one per controlled input)")
+    p.add_argument("--input", action="append", default=[], metavar="NAME",
+                   help="controlled input (default: all inputs, when as many as targets)")
+    p.add_argument("--fixed", action="append", default=[], metavar="NAME=VALUE", help="value of an input not controlled")
+    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE",
+                   help="state on the leaf to regulate on, and start of the simulation (e.g. seg1.l_p=0.015)")
+    p.add_argument("--neglect", metavar="STATE,STATE", help="storages left out of the design (globs such as seg*.Q1)")
+    p.add_argument("--damping", metavar="R|STATE=D", default="0",
+                   help="damping injection: R in R_a = R g g^T, or STATE=D for the dissipation D added on that row at x*")
+    p.add_argument("--stiffness", action="append", default=[], metavar="STATE=K",
+                   help="curvature of the added energy along a state at x* (energy shaping)")
+    p.add_argument("--structure", choices=("auto", "ansatz", "electromechanical"), default="auto",
+                   help="how the matching equations are solved (default: auto)")
+    p.add_argument("--integral", choices=("passive", "output"), help="integral action on the passive output or the "
+                                                                    "target error")
+    p.add_argument("--integral-time", type=_positive("--integral-time"), metavar="T",
+                   help="time constant of the integral action [s]")
+    p.add_argument("--t-end", type=_positive("--t-end"), metavar="T", help="simulate the closed loop for T seconds")
+    p.add_argument("--dt", type=_positive("--dt"), metavar="DT", help="output step of the simulation (default T/1000)")
+    p.add_argument("--plant-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="parameter of the simulated plant only (plant/controller mismatch)")
+    p.add_argument("--rays", type=_positive("--rays", integer=True), default=32, metavar="N",
+                   help="rays of the region-of-attraction estimate (default 32)")
+    p.add_argument("--simulations", type=_positive("--simulations", integer=True), default=6, metavar="N",
+                   help="closed-loop runs from random states in that region (default 6)")
+    p.add_argument("--export-c", metavar="DIR", help="write the control law as C source and header into DIR")
+    p.add_argument("--report", metavar="DIR", help="write DIR/controller.txt, certificates.json, closed_loop.png/.csv")
+    p.set_defaults(run=run_control)
+
+
+def _damping(text: str):
+    if "=" in text:
+        (name, value), = parse_assignments([text], "--damping", numeric=True).items()
+        return {name: value}
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputDataError(f"--damping {text!r}: expected a number or STATE=VALUE") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise InputDataError(f"--damping {text!r}: must be a finite number >= 0")
+    return v
+
+
+def _check_dir(option: str, path: str | None) -> None:
+    if path is None:
+        return
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise InputDataError(f"{option} {path!r} exists and is not a directory")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise InputDataError(f"{option} {path!r}: directory {parent!r} does not exist")
+
+
+def run_control(args: argparse.Namespace) -> int:
+    """Run ``phs control`` with parsed arguments; returns the exit code (0, 1; errors raise).
+
+    Everything (design, certificates, simulation, figure, C sources, JSON) is computed before the first
+    file is written.
+    """
+    from phs.workflows.cli import _check_writable, _finite_or_none, _name_list
+
+    _check_writable(args.json)
+    _check_dir("--report", args.report)
+    _check_dir("--export-c", args.export_c)
+    params = parse_assignments(args.param, "--param", numeric=True)
+    target = parse_assignments(args.target, "--target", numeric=True)
+    fixed = parse_assignments(args.fixed, "--fixed", numeric=True)
+    x0 = parse_assignments(args.x0, "--x0", numeric=True)
+    stiffness = parse_assignments(args.stiffness, "--stiffness", numeric=True)
+    plant_params = parse_assignments(args.plant_param, "--plant-param", numeric=True)
+    neglect = _name_list(args.neglect, "--neglect")
+    damping = _damping(args.damping)
+    if args.dt is not None and args.t_end is None:
+        raise InputDataError("--dt needs --t-end")
+    if args.t_end is not None and args.dt is not None and args.dt > args.t_end:
+        raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
+    system = load_model(args.model, params)
+    if plant_params:
+        system.param_vector(plant_params)  # ParameterError naming an unknown parameter before any work
+
+    from codegen.idapbc import design  # imported here: casadi is only needed once a model runs
+
+    ctrl = design(system, target, inputs=args.input or None, fixed_inputs=fixed, x0=x0 or None, neglect=neglect,
+                  structure=args.structure, damping=damping, stiffness=stiffness, integral=args.integral,
+                  integral_time=args.integral_time)
+    report = ctrl.certify(rays=args.rays, simulations=args.simulations)
+    text = ctrl.summary() + "\n" + report.text()
+    res = None
+    if args.t_end is not None:
+        dt = args.dt or args.t_end / 1000
+        t = np.arange(0.0, args.t_end + dt / 2, dt)
+        x0_plant = {k: v for k, v in x0.items()}
+        res = ctrl.simulate(t, plant=system, params=plant_params, x0=_plant_x0(ctrl, system, x0_plant))
+        lines = [f"closed loop on {system.name!r}" + (f" with {', '.join(f'{k}={v:g}' for k, v in plant_params.items())}"
+                                                      if plant_params else "") + f", {args.t_end:g} s:"]
+        for tg in ctrl.targets:
+            e = res.error(tg.name)
+            lines.append(f"  {tg.name}: final {res[tg.name][-1]:.6g} {tg.unit} (error {100 * e[-1]:+.4f} %), "
+                         f"within 1 % after {res.settling_time(0.01, tg.name):.4g} s")
+        for nm, info in res.info["input_ranges"].items():
+            lines.append(f"  {nm} from {info['min']:.6g} to {info['max']:.6g}"
+                         + (" - OUTSIDE its range" if info["exceeded"] else ""))
+        lines.append(f"  largest increase of H_d{' + integrator energy' if ctrl.integral == 'passive' else ''} "
+                     f"between samples: {res.max_increase('H_cl'):.3g} J")
+        text += "\n" + "\n".join(lines)
+    files: dict[str, str | bytes] = {}
+    if args.report is not None:
+        files["controller.txt"] = text + "\n"
+        files["certificates.json"] = json.dumps(_finite_or_none(report.to_dict()), indent=1, allow_nan=False) + "\n"
+        if res is not None:
+            files["closed_loop.png"] = _png(res)
+            buf = io.StringIO()
+            header, data = res.table()
+            np.savetxt(buf, data, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+            files["closed_loop.csv"] = buf.getvalue()
+    sources = None
+    if args.export_c is not None:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            paths = ctrl.export_c(tmp)
+            sources = {os.path.basename(p): open(p, encoding="utf-8").read() for p in paths}
+    document = None
+    if args.json:
+        import phs
+
+        document = {"command": "control", "model": args.model, "phs_version": phs.__version__,
+                    "controller": ctrl.to_dict(), "certificates": report.to_dict()}
+        if res is not None:
+            document["closed_loop"] = {
+                "t_end": float(res.t[-1]), "plant_params": plant_params,
+                "final": {tg.name: float(res[tg.name][-1]) for tg in ctrl.targets},
+                "settling_time_1pct": {tg.name: res.settling_time(0.01, tg.name) for tg in ctrl.targets},
+                "max_increase_H": res.max_increase("H_cl"), "inputs": res.info["input_ranges"]}
+        document = json.dumps(_finite_or_none(document), indent=1, allow_nan=False) + "\n"
+    print(text)
+    if args.report is not None:
+        os.makedirs(args.report, exist_ok=True)
+        for name, data in files.items():
+            write_atomic(os.path.join(args.report, name), data)
+    if sources is not None:
+        os.makedirs(args.export_c, exist_ok=True)
+        for name, data in sources.items():
+            write_atomic(os.path.join(args.export_c, name), data)
+    if document is not None:
+        write_atomic(args.json, document)
+    return 0 if report.passed else 1
+
+
+def _plant_x0(ctrl, system, x0: dict):
+    """Initial plant state: the given values, the design's x0 for the controller's states, 0 (clipped) otherwise."""
+    from codegen.idapbc import _state_vector
+
+    xs = _state_vector(system, None)
+    for nm, v in zip(ctrl.system.state_names, ctrl.x0):
+        xs[system.state_names.index(nm)] = v
+    for nm, v in x0.items():
+        if nm not in system.state_names:
+            raise InputDataError(f"--x0: system {system.name!r} has no state {nm!r}")
+        xs[system.state_names.index(nm)] = v
+    return xs
+
+
+def _png(res) -> bytes:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 7), constrained_layout=True)
+    FigureCanvasAgg(fig)
+    res.plot(fig=fig)
+    fig.suptitle(f"{res.system.name}: closed loop under IDA-PBC")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return buf.getvalue()
