@@ -597,10 +597,15 @@ class ChargeRetention(Candidate):
     summary = "a slow charge drift in the dielectric after each voltage change (charge retention, RC branch)"
 
     def attach_points(self, system):
-        return with_groups(charge_states(system))
+        return with_groups(charge_states(system)) + [i.name for i in system.inputs if i.kind == "effort"]
+
+    def _at_input(self, system, where, scales):
+        return _charge_retention_at_input(self, system, where, scales)
 
     def augment(self, system, where, scales):
         self._check_where(system, where)
+        if where in system.input_names:
+            return self._at_input(system, where, scales)
         members = _members(system, where, charge_states(system))
         first = members[0]
         c_ref = scales.get("level", first, 1.0) / scales.get("coenergy", first, 1.0)
@@ -619,6 +624,55 @@ class ChargeRetention(Candidate):
         starts = tuple({C.name: f * c_ref, tau.name: tt} for f in (1e3, 1e5) for tt in (tau0, min(10 * tau0, tau.range[1] * 0.9)))
         return Augmentation(self.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the capacitor", s,
                             [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], x0, starts=starts)
+
+
+def _charge_retention_at_input(cand, system, where, scales):
+    """ChargeRetention attached in series with an effort input (the source side of the circuit)."""
+    j = system.input_names.index(where)
+    driven = [system.state_names[k] for k in range(len(system.states)) if system.G[k, j] != 0 or system.P[k, j] != 0]
+    q_ref = max([scales.get("level", q, 0.0) for q in driven] + [0.0]) or 1.0
+    c_ref = q_ref / scales.get("level", where, 1.0)
+    tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
+    C = cand.param("C_r", 20 * c_ref, "F", f"retention capacitance in series with input {where}", _log_range(c_ref, 0.1, 1e7))
+    tau = cand.param("tau", tau0, "s", "retention time constant R_r·C_r", (5 * scales.dt, 10 * scales.duration))
+    name = f"{cand.effect}.Q"
+    st = StateInfo(name, "C", (-100 * q_ref, 100 * q_ref), f"charge of the retention branch at input {where}", "C", q_ref,
+                   cand.effect)
+    s = _series_with_input(system, j, st, st.symbol**2 / (2 * C.symbol), C.symbol / tau.symbol, [C, tau], cand.effect)
+    starts = tuple({C.name: f * c_ref, tau.name: tt} for f in (1e3, 1e5) for tt in (tau0, min(10 * tau0, tau.range[1] * 0.9)))
+    return Augmentation(cand.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the source", s,
+                        [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], {name: 0.0},
+                        starts=starts)
+
+
+def _series_with_input(system, j: int, state: StateInfo, energy: sp.Expr, conductance: sp.Expr, params, effect):
+    """Insert a one-state element (energy ``energy``, a conductance across it) in series with the
+    effort input ``j``: the model sees ``u_j − e_r`` and the element's charge obeys
+    ``Q̇_r = y_j − conductance·e_r`` with ``y_j`` the input's conjugate output (the source current)."""
+    n, m = len(system.states), len(system.inputs)
+    A, B = system.J - system.R, system.G - system.P
+    C, D = (system.G + system.P).T, system.S + system.N
+    ej = sp.zeros(m, 1)
+    ej[j] = 1
+    A2 = sp.zeros(n + 1, n + 1)
+    A2[:n, :n] = A
+    A2[:n, n] = -B * ej
+    A2[n, :n] = ej.T * C
+    A2[n, n] = -(ej.T * D * ej)[0, 0] - conductance
+    B2 = B.col_join(ej.T * D)
+    C2 = C.row_join(-D * ej)
+    J = (A2 - A2.T) / 2
+    R = -(A2 + A2.T) / 2
+    G = (B2 + C2.T) / 2
+    P = (C2.T - B2) / 2
+    z_old, z_new = _zsyms(n + m), _zsyms(n + 1 + m)
+    sub = {z_old[k]: (z_new[k] if k < n else z_new[k + 1]) for k in range(n + m)}
+    sub[z_old[n + j]] = z_new[n + 1 + j] - z_new[n]
+    diss = [(lab, _entries(_power(ent, z_old).xreplace(sub), z_new)) for lab, ent in system.dissipators]
+    diss.append((f"{effect}@{system.input_names[j]}", {(n, n): conductance}))
+    return _rebuild(system, states=tuple(system.states) + (state,),
+                    H=list(system.energy_terms) + [EnergyTerm(f"{effect}@{system.input_names[j]}", energy)],
+                    J=J, R=R, G=G, P=P, params=params, dissipators=diss, effect=effect)
 
 
 def _series_with_storage(system, where, state: StateInfo, energy: sp.Expr, conductance: sp.Expr, params, effect):

@@ -32,8 +32,8 @@ from components.candidates import (
     SlewRateLimit,
     TimeDelay,
 )
-from phs.errors import ModelError
 from phs.checks import unit_problems
+from phs.errors import ModelError
 from systems.electrostatic_actuator import electrostatic_actuator
 from systems.examples import mass_spring_damper, rlc_circuit
 
@@ -160,13 +160,14 @@ def test_series_resistance_adds_to_the_source_resistor():
 
 
 def test_hysteresis_loop_is_rate_independent():
-    """Dahl: force vs displacement traced at two speeds gives the same loop."""
+    """Bouc-Wen/Dahl: force vs displacement traced at two speeds gives the same loop, saturating at
+    F_h / (1 + eta) while loading."""
     s = mass_spring_damper()
     a = Hysteresis().augment(s, "m.p", Scales.of(s)).system
     zi = a.state_names.index("hysteresis.z")
     f = generate(a)
     p = a.param_vector()
-    kh, Fh = a.param("hysteresis.k_h").value, a.param("hysteresis.F_h").value
+    kh, Fh, eta = (a.param(f"hysteresis.{k}").value for k in ("k_h", "F_h", "eta"))
 
     def loop(speed):  # drive the element's displacement directly: dz/dt from the rhs at velocity v
         z, out = 0.0, []
@@ -181,7 +182,9 @@ def test_hysteresis_loop_is_rate_independent():
 
     slow, fast = loop(1.0), loop(4.0)
     assert np.max(np.abs(slow - fast)) <= 0.02 * Fh
-    assert np.max(np.abs(slow)) <= Fh * (1 + 1e-6)
+    # |v| and |z| are smoothed with a small epsilon: the bound holds to 1e-3 relative
+    assert np.max(np.abs(slow)) <= Fh / (1 + eta) * (1 + 1e-3)
+    assert np.max(np.abs(slow)) >= 0.95 * Fh / (1 + eta)  # the loop reaches saturation
 
 
 def test_input_elements_transform_as_documented():

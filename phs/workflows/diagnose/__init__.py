@@ -378,6 +378,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if round_ == 0:
             all_hyps = hyps
         pick = _pick(current, hyps)
+        if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
+            hyps.remove(pick)
+            hyps.insert(0, pick)
         if pick is None:
             break
         accepted.append(pick)
