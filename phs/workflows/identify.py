@@ -789,7 +789,9 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         v = values[k]
         if k in log_scaled:
             std[k] = abs(v) * se_z[i]
-            ci[k] = (v * float(np.exp(-1.96 * se_z[i])), v * float(np.exp(1.96 * se_z[i])))
+            # an unidentifiable parameter has a huge log-scale error: its interval is (0, inf)
+            spread = float(np.exp(min(1.96 * se_z[i], 700.0)))
+            ci[k] = (v / spread, v * spread if spread < 1e300 else float("inf"))
         else:
             std[k] = abs(prob.nominal[i]) * se_z[i]
             ci[k] = (v - 1.96 * std[k], v + 1.96 * std[k])

@@ -210,7 +210,11 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top):
         return _run_all(current, augs, data, n_jobs, progress, label)
     screened = _run_all(current, augs, data, n_jobs, progress, label + " screening", joint=False)
     screened.sort(key=lambda h: (not h.ok, -_gain(current, h)))
-    top = [h for h in screened if h.ok][:refit_top]
+    top, seen = [], set()
+    for h in screened:  # the most promising distinct effects (one attachment each)
+        if h.ok and h.augmentation.effect not in seen and len(top) < refit_top:
+            top.append(h)
+            seen.add(h.augmentation.effect)
     refits = []
     for h in top:
         aug = h.augmentation

@@ -184,7 +184,7 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True) -> Score
             try:
                 fit = identify(system.with_params(start) if start else system, data.recording, free, bounds=bounds, x0=x0,
                                outputs=data.outputs, log_scale=log_scale, rtol=data.rtol, max_iter=30 if joint else 10,
-                               ftol=1e-6 if joint else 1e-3)
+                               ftol=1e-6 if joint else 1e-3, compile=None if joint else False)
             except (PHSError, RuntimeError) as exc:
                 if best is None and start == {} and not aug.starts:
                     raise
@@ -257,11 +257,9 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             theta[k] = float(grid[b])
     transformed = _transformed(rec, el, where, theta)
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
-    if not joint:
-        return score(f"{aug.effect}@{where}", nominal.system, nominal.values, nominal.x0, len(data.free) + len(specs), data,
-                     augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
     fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
         zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
-        log_scale=data.log_scale or None, rtol=data.rtol, max_iter=30, ftol=1e-6)
+        log_scale=data.log_scale or None, rtol=data.rtol, max_iter=30 if joint else 10, ftol=1e-6 if joint else 1e-3,
+        compile=None if joint else False)
     return score(f"{aug.effect}@{where}", nominal.system, fit.values, fit.x0, len(data.free) + len(specs), data,
                  augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
