@@ -39,7 +39,7 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
     "phs.workflows.passivity_cli",
     "phs.workflows.control_cli",
     "phs.workflows.diagnose.cli",
-    # sweep
+    "phs.workflows.sweep_cli",
 )
 
 
