@@ -52,6 +52,11 @@ from codegen.results import SimulationResult
 from codegen.simulator import Simulator, _fmt_state, _runs
 from phs.errors import DomainError, InputDataError, PHSError, SimulationError
 
+#: Held while a batch runs.  CasADi releases Python's GIL during its calls, but building functions
+#: (integrators, maps) is not thread-safe: concurrent batches in one process (threads of a Dask worker)
+#: take turns; each batch still evaluates in its own CasADi threads.
+LOCK = threading.RLock()
+
 #: Derived signals that :meth:`BatchSimulator.run` can evaluate for a whole chunk at once.
 SIGNALS = ("measured", "output", "power", "hamiltonian")
 
@@ -455,6 +460,7 @@ class BatchSimulator:
         self.functions = generate(system)
         self._runfuns: dict = {}
         self._mapped: dict = {}
+        self._inner: dict = {}
         self._subsets: dict = {}
 
     # -- pickling: the model travels with its serialized generated functions ------------------------------
@@ -478,7 +484,11 @@ class BatchSimulator:
         key = (id(f), n, inner, self.threads)
         hit = self._mapped.get(key)
         if hit is None:
-            g = f.map(f"{f.name()}_grid", "serial", inner, [2], []) if inner else f
+            g = f
+            if inner:  # over the grid points of one run (parameters shared): built once per function
+                g = self._inner.get((id(f), inner))
+                if g is None:
+                    g = self._inner[(id(f), inner)] = f.map(f"{f.name()}_grid", "serial", inner, [2], [])
             hit = _Mapped(g.map(n, "thread", min(self.threads, n)) if self.threads > 1 and n > 1 else g.map(n, "serial"))
             self._mapped[key] = hit
             if len(self._mapped) > 64:
@@ -513,6 +523,10 @@ class BatchSimulator:
         InputDataError
             When the per-run lists disagree in length or ``signals`` names an unknown signal.
         """
+        with LOCK:  # see LOCK: CasADi's symbolic construction is not thread-safe
+            return self._run(params, u, x0, signals, n)
+
+    def _run(self, params, u, x0, signals, n) -> BatchResult:
         wall = _time.perf_counter()
         bad = [s for s in signals if s not in SIGNALS and s not in self.system.measured_names]
         if bad:
@@ -680,7 +694,12 @@ class BatchSimulator:
     def _violations(self, X, U_check, P) -> np.ndarray:
         """Per run: a non-finite state or a violated validity condition at some grid point (one threaded call)."""
         s = self.system
-        bad = ~np.all(np.isfinite(X), axis=(1, 2))
+
+        def nonfinite_or_below(A, low):  # per run, without temporaries of A's size: NaN propagates through min/max
+            lo = A.min(axis=(1, 2))
+            return ~np.isfinite(lo) | ~(lo >= low) | ~np.isfinite(A.max(axis=(1, 2)))
+
+        bad = nonfinite_or_below(X, -np.inf)
         if s.conditions:
             N, nt = X.shape[0], X.shape[1]
             buf, trigger = self._map(self.functions.conditions, N, inner=nt).buffer()
@@ -690,7 +709,7 @@ class BatchSimulator:
             buf.set_res(0, memoryview(G))
             with np.errstate(all="ignore"), _quiet():
                 trigger()
-            bad |= np.any((G < -1e-12) | ~np.isfinite(G), axis=(1, 2))
+            bad |= nonfinite_or_below(G, -1e-12)
         return bad
 
     def _check(self, x, xoff, shape: _Shape, p) -> PHSError | None:

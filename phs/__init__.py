@@ -31,7 +31,7 @@ __all__ = [
     "Component", "symbol_of_input", "symbol_of_output", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
     "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
     "bond", "feedback_link", "feedback", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
-    "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "identify", "Recording", "load",
+    "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "identify", "diagnose", "sweep", "Recording", "load",
 ]
 
 
@@ -64,4 +64,12 @@ def __getattr__(name):
         from phs.workflows.recording import Recording
 
         return Recording
+    if name == "diagnose":
+        from phs.workflows.diagnose import diagnose
+
+        return diagnose
+    if name == "sweep":
+        from phs.workflows.sweep import sweep
+
+        return sweep
     raise AttributeError(f"module 'phs' has no attribute {name!r}")

@@ -300,6 +300,12 @@ class _Evaluator:
         self.batch = BatchSimulator(study.system, study.t, threads=threads, **study.options)
 
     def __call__(self, runs: Sequence[tuple[int, dict]]) -> list[dict]:
+        from codegen.batch import LOCK
+
+        with LOCK:  # the metrics may build CasADi functions too (signals computed on demand)
+            return self._evaluate(runs)
+
+    def _evaluate(self, runs: Sequence[tuple[int, dict]]) -> list[dict]:
         rows: dict[int, dict] = {}
         todo, params, us, x0s = [], [], [], []
         for run, values in runs:
@@ -537,6 +543,17 @@ def _chunk_size(study: Study, n_todo: int, workers: int) -> int:
     return max(1, min(by_memory, balance, 256))
 
 
+def _chunks(todo: list, size: int, exact: bool = False) -> list[list]:
+    """Split the runs into chunks of ``size``, or of a slightly smaller size that divides their number
+    (every chunk size builds its own mapped functions and work memory once)."""
+    if not exact:
+        for s in range(size, max(1, math.ceil(0.6 * size)) - 1, -1):
+            if len(todo) % s == 0:
+                size = s
+                break
+    return [todo[i:i + size] for i in range(0, len(todo), size)]
+
+
 class _Progress:
     """A tqdm progress bar over runs counting the failed ones (nothing when disabled or tqdm is missing)."""
 
@@ -648,8 +665,8 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
                 n_threads = threads or default_threads()
                 size = chunk_size or _chunk_size(study, len(todo), n_threads)
                 ev = _Evaluator(study, n_threads)
-                for i in range(0, len(todo), size):
-                    rows = ev([(k, study.values(k)) for k in todo[i:i + size]])
+                for chunk in _chunks(todo, size, exact=chunk_size is not None):
+                    rows = ev([(k, study.values(k)) for k in chunk])
                     store.add(rows)
                     bar.update(rows)
     finally:
@@ -684,7 +701,7 @@ def _run_dask(study, todo, store, bar, scheduler, processes, threads, chunk_size
     try:
         workers = max(1, len(client.scheduler_info().get("workers", {})) or (processes or 1))
         size = chunk_size or _chunk_size(study, len(todo), workers)
-        chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+        chunks = _chunks(todo, size, exact=chunk_size is not None)
         [ev] = client.scatter([_Evaluator(study, threads)], broadcast=True)
         pending = iter(chunks)
         runs_of = {}

@@ -249,7 +249,9 @@ def test_single_measured_outputs_evaluated_for_the_batch(electromechanical):
 
 
 def test_concurrent_batches_from_python_threads(msd):
-    """Worker threads (a Dask worker with several threads) share a batch simulator; the console survives."""
+    """Threads of one process (a Dask worker with several threads) share a batch simulator: runs take turns
+    (building CasADi functions is not thread-safe; each run still uses its own CasADi threads) and the console
+    survives."""
     import threading
 
     t = np.linspace(0.0, 1.0, 51)
