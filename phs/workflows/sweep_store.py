@@ -53,6 +53,16 @@ def results_format(path) -> str:
     return ext[1:]
 
 
+def _pyarrow():
+    """``(pyarrow, pyarrow.parquet)``, or an error saying how to do without."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise InputDataError("Parquet files need pyarrow (pip install pyarrow); or use a .csv file") from None
+    return pa, pq
+
+
 def _columns_of(numeric: list[str]) -> list[str]:
     return ["run", *numeric, "status", "error"]
 
@@ -69,9 +79,7 @@ def encode(rows: list[dict], numeric: list[str], fmt: str, metadata: dict | None
     """
     cols = _columns_of(numeric)
     if fmt == "parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
+        pa, pq = _pyarrow()
         arrays = {"run": pa.array([int(r["run"]) for r in rows], type=pa.int64())}
         for c in numeric:
             arrays[c] = pa.array([float(r[c]) for r in rows], type=pa.float64())
@@ -105,9 +113,7 @@ def decode(data: bytes, fmt: str, source: str) -> list[dict]:
     'boom'
     """
     if fmt == "parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
+        pa, pq = _pyarrow()
         try:  # no pre-buffering and no threads: Arrow's thread pools can abort the interpreter at exit
             table = pq.ParquetFile(pa.BufferReader(data), pre_buffer=False).read(use_threads=False)
         except Exception as exc:  # noqa: BLE001 - any unreadable file is reported with its name
@@ -161,9 +167,7 @@ def read_rows(path) -> tuple[list[dict], dict]:
         data = fh.read()
     meta = {}
     if fmt == "parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
+        pa, pq = _pyarrow()
         try:
             md = pq.ParquetFile(pa.BufferReader(data), pre_buffer=False).schema_arrow.metadata or {}
         except Exception:  # noqa: BLE001 - decode() reports unreadable files
@@ -223,6 +227,8 @@ class ResultStore:
         if self.path is None:
             return
         self.fmt = results_format(self.path)
+        if self.fmt == "parquet":
+            _pyarrow()
         d = os.path.dirname(os.path.abspath(self.path))
         if not os.path.isdir(d):
             raise InputDataError(f"cannot write {self.path!r}: directory {d!r} does not exist")
