@@ -49,7 +49,7 @@ import numpy as np
 from codegen import functions as _functions
 from codegen.functions import GeneratedFunctions, generate
 from codegen.results import SimulationResult
-from codegen.simulator import Simulator, _fmt_state, _runs
+from codegen.simulator import Simulator, _bounded, _fmt_state, _runs
 from phs.errors import DomainError, InputDataError, PHSError, SimulationError
 
 #: Held while a batch runs.  CasADi releases Python's GIL during its calls, but building functions
@@ -216,8 +216,8 @@ def _shape(sim: Simulator, t: np.ndarray, u) -> _Shape:
         pts = [a] + [float(t[i]) for i in idx_in]
         if pts[-1] < b - tol_b:
             pts.append(b)
-        for ra, rh, rn in _runs(pts):
-            F, layout = sim._integrator(rn, slots, sampled)
+        for ra, rh, rn, ms in _bounded(_runs(pts), sigs):
+            F, layout = sim._integrator(rn, slots, sampled, ms)
             c = sim._pvec(np.zeros(0), ra, rh, layout, choice)
             times = ra + rh * np.arange(1, rn + 1)
             uu = sim._eval_inputs(sigs, slots, choice, times)

@@ -1,7 +1,8 @@
 """Grey-box identification: output-error fit of chosen parameters to a recording.
 
 CVODES integrates the model over the whole recording with the recorded inputs
-linearly interpolated (restarted at the input's kinks), the measured outputs are
+linearly interpolated (restarted at the input's kinks; smooth stretches of a
+finely sampled input by a cubic spline, see ``codegen.simulator.step_windows``), the measured outputs are
 evaluated on the recording's grid, and the residual's Jacobian with respect to
 the free parameters (and optionally free initial states) comes from CVODES
 forward sensitivities integrated with the state (exact to the integration
@@ -36,7 +37,7 @@ import scipy.optimize
 import sympy as sp
 
 from codegen.functions import _model_hash, generate
-from codegen.simulator import Simulator, simulate
+from codegen.simulator import Simulator, simulate, step_windows
 from phs.errors import InputDataError, ParameterError, PHSError, SimulationError
 from phs.params import TIME
 from phs.signals import Sampled
@@ -327,9 +328,14 @@ class _Problem:
         # a recorded input that is piecewise linear with few kinks (steps, staircases, square waves
         # as sampled) is integrated piece by piece with restarts at its kinks, so CVODES takes long
         # steps in between; otherwise it is interpolated and the step bounded by the sample interval
+        # (in windows whose step bound follows the input's smoothness: see ``step_windows``)
         kinks = _kinks(U)
         piecewise = nu > 0 and len(kinks) <= max(20, (N - 1) // 20)
-        cuts = sorted(set(self.ms_edges) | (set(kinks) if piecewise else set()))
+        windows = step_windows(U) if nu > 0 and not piecewise else []
+        cuts = sorted(set(self.ms_edges) | (set(kinks) if piecewise else {w[0] for w in windows}))
+        bound = np.ones(N)  # the step bound of the window each sample interval belongs to
+        for w0, w1, m in windows:
+            bound[w0:w1] = m
         gen = generate(system)
         scale = np.array([st.typical for st in system.states], dtype=float)  # the simulator's scaling
         # the fitted channels and their Jacobians at one sample (mapped over the recording below)
@@ -393,8 +399,9 @@ class _Problem:
                         coef += [1.0, U[i0, j] - slope * t[i0], slope]
                     tail = np.array([t[i0], dt] + coef)
                 else:
-                    F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids)
-                    Fs, _layout = sens._integrator(i1 - i0, [[] for _ in range(nu)], grids)
+                    ms = float(np.min(bound[i0:i1]))
+                    F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
+                    Fs, _layout = sens._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
                     tail = np.array([t[i0], dt])
                 self.segments.append((i0, i1, F, Fs, tail))
             if outputs_lib is not None:
@@ -671,8 +678,8 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     """
     wall = _time.perf_counter()
     free = list(free)
-    if not free:
-        raise ParameterError("identify: give at least one free parameter")
+    if not free and not estimate_x0:
+        raise ParameterError("identify: give at least one free parameter (or states in estimate_x0)")
     for k in free:
         system.param(k)  # raises ParameterError naming it
     code = system  # its generated functions serve every parameter value (they take p as an input)

@@ -200,14 +200,17 @@ def test_sine_input_forms_match_the_analytic_response(rc):
 
 
 def test_numpy_callables_and_arrays_are_sampled_on_the_grid(rc):
-    """A numpy-only callable or an array is interpolated linearly between grid points: error ~ (w h)^2 / 8."""
+    """A numpy-only callable or an array is sampled on the grid and interpolated: a smooth signal (this
+    sine, 100 samples per period) by a cubic spline (``step_windows``), error ~ (w h)^4 / 384 ≈ 1e-7;
+    never exact (the samples are all the simulator sees)."""
     t = np.linspace(0.0, 4e-3, 201)
     exact = simulate(rc, t, u={"U": signals.sine(2.0, 500.0)}, rtol=RTOL)["C.Q"]
     for spec in (lambda tt: 2.0 * np.sin(2 * np.pi * 500.0 * tt), 2.0 * np.sin(2 * np.pi * 500.0 * t)):
         res = simulate(rc, t, u={"U": spec}, rtol=RTOL)["C.Q"]
-        # (w h)^2 / 8 = (2 pi 500 * 2e-5)^2 / 8 = 5e-3 relative; the RC filter only reduces it
+        # (w h)^4 / 384 = (2 pi 500 * 2e-5)^4 / 384 = 1.0e-7 relative (linear: (w h)^2 / 8 = 5e-3); the RC
+        # filter only reduces it
         err = np.max(np.abs(res - exact)) / np.max(np.abs(exact))
-        assert 1e-6 < err < 5e-3  # sampled (not exact), but only by the interpolation error
+        assert 1e-10 < err < 1e-6  # sampled (not exact), by the spline's interpolation error
 
 
 def test_x0_as_dict_or_array_and_default_zero(rlc):
