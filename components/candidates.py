@@ -143,6 +143,8 @@ class Augmentation:
     log_scale: list
     x0: dict = field(default_factory=dict)
     element: InputElement | None = None
+    summary: str = ""
+    """The candidate's phrase for explanations (filled in from :attr:`Candidate.summary` when empty)."""
     starts: tuple = ()
     """Alternative starting values ({parameter: value}) tried when screening, for parameters whose
     plausible values span decades (a retention capacitance, a time constant)."""
@@ -214,6 +216,22 @@ def displacement_states(system) -> list[str]:
 def charge_states(system) -> list[str]:
     """Electrical charges (unit C)."""
     return [st.name for st in system.states if st.kind == "C" and _same_dimension(st.unit, ("C",))]
+
+
+_STORED_QUANTITY = ("C", "m**3", "kg", "mol")
+
+
+def stored_quantity_states(system) -> list[str]:
+    """Conserved quantities held by a storage: electrical charge, fluid volume, gas mass or amount
+    (states of kind ``C`` with unit C, m³, kg or mol) — what a leak can drain.
+
+    Examples
+    --------
+    >>> from systems.lab import air_chamber
+    >>> stored_quantity_states(air_chamber())
+    ['V_a']
+    """
+    return [st.name for st in system.states if st.kind == "C" and _same_dimension(st.unit, _STORED_QUANTITY)]
 
 
 def _same_dimension(unit: str, candidates) -> bool:
@@ -332,6 +350,22 @@ def _add_damping(system, index: int, coefficient: sp.Expr, label: str, params, e
     R[index, index] += coefficient
     diss = list(system.dissipators) + [(label, {(index, index): coefficient})]
     return _rebuild(system, R=R, params=params, dissipators=diss, effect=effect)
+
+
+def add_damping(system, state: str, coefficient: sp.Expr, params, effect: str):
+    """``system`` with ``R[state, state] += coefficient`` (a nonnegative expression of the states and
+    parameters), recorded as its own dissipating element ``{effect}@{state}``; ``params`` are the new
+    parameters the coefficient uses.  The building block of candidates that add a drain or a friction.
+
+    Examples
+    --------
+    >>> from systems.lab import air_chamber
+    >>> from phs import Param
+    >>> G = Param("leak.G", 1e-12, "m**3/(s*Pa)", "conductance", (1e-15, 1e-9))
+    >>> add_damping(air_chamber(), "V_a", G.symbol, [G], "leak").R
+    Matrix([[leak.G]])
+    """
+    return _add_damping(system, system.state_names.index(state), coefficient, f"{effect}@{state}", params, effect)
 
 
 def _smooth_abs(v: sp.Expr, eps: float) -> sp.Expr:
@@ -567,23 +601,34 @@ class CubicStiffness(_AtStates):
 
 # -- electrical candidates ------------------------------------------------------------------------------------
 class Leakage(Candidate):
-    """A conductance across a capacitor (charge leaking through the dielectric): ``R[Q, Q] += G_l``."""
+    """A conductance across a storage of a conserved quantity (charge leaking through a dielectric,
+    fluid through a leak): ``R[Q, Q] += G_l``, a drain proportional to the storage's effort
+    (voltage, pressure)."""
 
     effect = "leakage"
-    summary = "charge leaking through the dielectric (a conductance across the capacitor)"
+    summary = "the stored charge or fluid leaking away (a conductance across the storage)"
 
     def attach_points(self, system):
-        return with_groups(charge_states(system))
+        return with_groups(stored_quantity_states(system))
 
     def augment(self, system, where, scales):
         self._check_where(system, where)
-        members = _members(system, where, charge_states(system))
-        g_ref = scales.get("rate", members[0], 1.0) / scales.get("coenergy", members[0], 1.0)
-        G = self.param("G_l", 0.02 * g_ref, "S", f"leakage conductance across {where}", _log_range(g_ref, 1e-5, 100.0))
+        members = _members(system, where, stored_quantity_states(system))
+        # the conductance that would carry the storage's typical rate at its typical effort, and at
+        # least the one that would drain it over ten recording lengths (a storage the nominal model
+        # holds still has no typical rate)
+        c_ref = scales.get("level", members[0], 1.0) / scales.get("coenergy", members[0], 1.0)
+        g_ref = max(scales.get("rate", members[0], 1.0) / scales.get("coenergy", members[0], 1.0), c_ref / (10 * scales.duration))
+        unit = "S" if members[0] in charge_states(system) else f"({_unit_of(system, members[0])})/s per unit of effort"
+        G = self.param("G_l", 0.02 * g_ref, unit, f"leakage conductance across {where}", _log_range(g_ref, 1e-5, 100.0))
         s = system
         for k, name in enumerate(members):
             s = _add_damping(s, s.state_names.index(name), G.symbol, f"{self.effect}@{name}", [G] if k == 0 else [], self.effect)
-        return Augmentation(self.effect, where, "conductance G_l across the capacitor", s, [G.name], {G.name: G.range}, [G.name])
+        # also from slow leaks (time constants of the order of the recording): a fast start drains a
+        # held storage at once, and from there the fit cannot find the gentle decay of a slow leak
+        starts = tuple({G.name: min(max(c_ref / (f * scales.duration), G.range[0] * 1.01), G.range[1] * 0.99)} for f in (0.3, 3.0))
+        return Augmentation(self.effect, where, "conductance G_l across the storage", s, [G.name], {G.name: G.range}, [G.name],
+                            starts=starts)
 
 
 class ChargeRetention(Candidate):
@@ -597,7 +642,9 @@ class ChargeRetention(Candidate):
     summary = "a slow charge drift in the dielectric after each voltage change (charge retention, RC branch)"
 
     def attach_points(self, system):
-        return with_groups(charge_states(system)) + [i.name for i in system.inputs if i.kind == "effort"]
+        # capacitors, and voltage sources (the circuit's side of the electrodes)
+        return with_groups(charge_states(system)) + [i.name for i in system.inputs
+                                                      if i.kind == "effort" and _same_dimension(i.unit, ("V",))]
 
     def _at_input(self, system, where, scales):
         return _charge_retention_at_input(self, system, where, scales)
@@ -823,7 +870,7 @@ class TimeDelay(InputElement):
 class InputSaturation(InputElement):
     """A saturation of the input at ``U_hi`` above and ``-U_lo`` below (possibly asymmetric), with
     corners rounded over 5 % of the input's peak: ``u − sp(u − U_hi) + sp(−u − U_lo)``, ``sp`` the
-    softplus.  The limits are searched below the recorded peaks (a limit above them has no effect)."""
+    softplus, shifted to pass through zero.  The limits are searched below the recorded peaks (a limit above them has no effect)."""
 
     effect = "input_saturation"
     summary = "the input saturating at large amplitude (drive or actuator limit)"
@@ -842,7 +889,8 @@ class InputSaturation(InputElement):
             return w * np.logaddexp(0.0, x / w)
 
         hi, lo = float(theta[0]), float(theta[1])
-        return u - sp_(u - hi) + sp_(-u - lo)
+        # minus its value at zero: the rounded corners must not turn a zero input into a small constant one
+        return u - sp_(u - hi) + sp_(-u - lo) + sp_(-hi) - sp_(-lo)
 
 
 class SlewRateLimit(InputElement):
@@ -884,6 +932,7 @@ EFFECTS: tuple[str, ...] = tuple(c.effect for c in LIBRARY)
 
 __all__ = [
     "Scales", "Augmentation", "Candidate", "InputElement", "LIBRARY", "EFFECTS", "momentum_states", "displacement_states",
-    "charge_states", "with_groups", "ChargeRetention", "Leakage", "SeriesResistance", "CoulombFriction", "ViscoelasticCreep",
+    "charge_states", "stored_quantity_states", "add_damping", "with_groups", "ChargeRetention", "Leakage", "SeriesResistance",
+    "CoulombFriction", "ViscoelasticCreep",
     "CubicStiffness", "Hysteresis", "QuadraticDrag", "AddedMass", "InputSaturation", "SlewRateLimit", "TimeDelay", "Offset",
 ]

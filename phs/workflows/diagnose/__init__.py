@@ -33,6 +33,10 @@ MIN_VALIDATION_GAIN = 0.01
 """Relative decrease of the validation residual needed to accept a hypothesis."""
 SUFFICIENT_MARGIN = 0.03
 """Hypotheses within this relative validation-residual margin of the best count as equally good."""
+FRICTION_LIKE = 0.05
+"""A hysteresis loop whose saturated deflection ``F_h / (k_h (1 + eta))`` is below this share of the
+displacement's standard deviation is friction with a pre-sliding regime, not a loop of the material:
+when smooth Coulomb friction at the same place is accepted too, it is the simpler explanation."""
 SPLIT = 0.7
 """Share of a single recording used for training when no validation recording is given."""
 
@@ -163,14 +167,57 @@ def _accepted(nominal, h) -> bool:
     return h.ok and h.stage == "full" and -_delta_bic(nominal, h) >= MIN_BIC_GAIN and _gain(nominal, h) >= MIN_VALIDATION_GAIN
 
 
-def _pick(nominal, hyps):
-    """Best accepted hypothesis, preferring fewer parameters among the equally good ones."""
+def _pick(nominal, hyps, data=None):
+    """Best accepted hypothesis, preferring fewer parameters among the equally good ones, and Coulomb
+    friction over a hysteresis element that only describes friction (see :data:`FRICTION_LIKE`)."""
     acc = [h for h in hyps if _accepted(nominal, h)]
     if not acc:
         return None
     best = min(h.validation_rss for h in acc)
     good = [h for h in acc if h.validation_rss <= best * (1 + SUFFICIENT_MARGIN) + 1e-300]
-    return min(good, key=lambda h: (h.n_params, h.bic))
+    pick = min(good, key=lambda h: (h.n_params, h.bic))
+    if data is not None and pick.augmentation.effect == "hysteresis":
+        share = presliding_share(nominal, pick, data)
+        friction = [h for h in acc if h.augmentation.effect == "coulomb_friction"
+                    and h.augmentation.attached_to == pick.augmentation.attached_to]
+        if share is not None and share < FRICTION_LIKE and friction:
+            f = friction[0]
+            f.notes.append(f"A hysteresis element at {pick.augmentation.attached_to} fits a little better (validation residual "
+                           f"{100 * _gain(nominal, pick):+.1f} % against {100 * _gain(nominal, f):+.1f} %), but its loop closes "
+                           f"within {100 * share:.2g} % of the motion's standard deviation: that is the pre-sliding regime of "
+                           f"friction, not a hysteresis of the material, and smooth Coulomb friction describes it with fewer parameters.")
+            return f
+    return pick
+
+
+def presliding_share(nominal, h, data) -> float | None:
+    """For a fitted ``hysteresis`` hypothesis: its saturated deflection ``F_h / (k_h (1 + eta))``
+    divided by the standard deviation of the displacement its momentum moves (along the nominal
+    fit: its velocity ∂H/∂p integrated); None for other effects or grouped attachments.
+    Small (≪ 1): the loop closes within a tiny part of the motion — pre-sliding friction; of order
+    one or more: the loop spans the motion — hysteresis of the material or the structure."""
+    from phs.workflows.diagnose.hypotheses import train_result
+
+    aug = h.augmentation
+    if aug.effect != "hysteresis" or aug.attached_to.startswith("*."):
+        return None
+    k, F, eta = (h.values.get(f"hysteresis.{n}") for n in ("k_h", "F_h", "eta"))
+    if k is None or F is None:
+        return None
+    eta = 0.0 if eta is None else eta
+    if 1 + eta <= 0 or k <= 0:
+        return math.inf
+    # the displacement the momentum moves: its velocity ∂H/∂p integrated along the nominal fit
+    s = nominal.system
+    res = train_result(nominal, data)
+    X = np.asarray(res.x)
+    i = s.state_names.index(aug.attached_to)
+    grad = s.with_params(nominal.values).lambdify(s.grad_H[i], with_u=False)
+    v = np.broadcast_to(np.asarray(grad(X.T), dtype=float).reshape(-1), (len(X),)) if len(X) else np.zeros(0)
+    t = np.asarray(res.t)
+    disp = np.concatenate([[0.0], np.cumsum(np.diff(t) * (v[1:] + v[:-1]) / 2)])
+    stroke = float(np.std(disp))
+    return float(F / (k * (1 + eta)) / stroke) if stroke > 0 else math.inf
 
 
 def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
@@ -364,10 +411,13 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         augs = []
         for c in pool:
             for w in c.attach_points(current.system):
+                if c.kind == "input" and np.ptp(np.asarray(data.recording[w], float)) == 0:
+                    continue  # a constant input: saturation, slew rate or delay change nothing
                 if any(a.augmentation.effect == c.effect and a.augmentation.attached_to == w for a in accepted):
                     continue
                 try:
-                    augs.append(c.augment(current.system.with_params(current.values), w, scales))
+                    aug = c.augment(current.system.with_params(current.values), w, scales)
+                    augs.append(aug if aug.summary else replace(aug, summary=c.summary))
                 except Exception as exc:  # a user candidate that cannot attach here is skipped, and said so
                     if progress:
                         print(f"  {c.effect}@{w}: cannot attach ({exc})", file=sys.stderr)
@@ -381,7 +431,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         rounds.append(hyps)
         if round_ == 0:
             all_hyps = hyps
-        pick = _pick(current, hyps)
+        pick = _pick(current, hyps, data_r)
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
             hyps.insert(0, pick)

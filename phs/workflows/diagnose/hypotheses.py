@@ -44,6 +44,7 @@ class Scored:
     stage: str = "full"                  # "screening": fitted and scored on subsampled data only
     reference_rss: float | None = None   # validation residual of the model this one extends, same data
     reference_bic: float | None = None
+    notes: list = field(default_factory=list)  # sentences for the explanation (why it was chosen)
 
     @property
     def ok(self) -> bool:
@@ -182,9 +183,10 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True) -> Score
         best = None
         for start in [{}] + [dict(st) for st in aug.starts]:
             try:
+                # the estimated initial states are estimated again: a new element changes what start explains the data
                 fit = identify(system.with_params(start) if start else system, data.recording, free, bounds=bounds, x0=x0,
                                outputs=data.outputs, log_scale=log_scale, rtol=data.rtol, max_iter=30 if joint else 10,
-                               ftol=1e-6 if joint else 1e-3, compile=None if joint else False)
+                               ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0)
             except (PHSError, RuntimeError) as exc:
                 if best is None and start == {} and not aug.starts:
                     raise
@@ -257,9 +259,13 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             theta[k] = float(grid[b])
     transformed = _transformed(rec, el, where, theta)
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
-    fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
-        zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
-        log_scale=data.log_scale or None, rtol=data.rtol, max_iter=30 if joint else 10, ftol=1e-6 if joint else 1e-3,
-        compile=None if joint else False)
-    return score(f"{aug.effect}@{where}", nominal.system, fit.values, fit.x0, len(data.free) + len(specs), data,
+    if not data.free and not data.estimate_x0:  # nothing of the model to refit through the element
+        values, x0 = dict(nominal.values), nominal.x0
+    else:
+        fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
+            zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
+            log_scale=data.log_scale or None, rtol=data.rtol, max_iter=30 if joint else 10, ftol=1e-6 if joint else 1e-3,
+            compile=None if joint else False, estimate_x0=data.estimate_x0)
+        values, x0 = fit.values, fit.x0
+    return score(f"{aug.effect}@{where}", nominal.system, values, x0, len(data.free) + len(specs), data,
                  augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)

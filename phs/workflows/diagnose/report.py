@@ -63,14 +63,15 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
     out = []
     for k, h in enumerate(accepted):
         aug = h.augmentation
-        what = summaries.get(aug.effect, type(aug).__name__)
+        what = aug.summary or summaries.get(aug.effect, aug.component or aug.effect)
         ev = [f for f in findings if f.kind in _EVIDENCE.get(aug.effect, ())][:2]
         where = "; ".join(f"{f.channel}: {f.where}" for f in ev)
         params = _fmt_params({**{p: h.values[p] for p in aug.free if p in h.values}, **h.element_values})
         lead = "Missing physics" if k == 0 else "A second effect"
         out.append(f"{lead}: {what} — {aug.effect} at {aug.attached_to} ({aug.component}; {params})."
                    + (f" It showed as {where}." if where else "")
-                   + f" Fit: {_fits(nominal if k == 0 else accepted[k - 1], h, outs)}.")
+                   + f" Fit: {_fits(nominal if k == 0 else accepted[k - 1], h, outs)}."
+                   + "".join(f" {n}" for n in h.notes))
     if rival is not None:
         from phs.workflows.diagnose import _gain
 
