@@ -15,7 +15,7 @@ import numpy as np
 from codegen import simulate
 from phs.signals import square, staircase
 from phs.workflows.diagnose import diagnose
-from phs.workflows.diagnose.report import figure_fits, figure_hypotheses, figure_locate
+from phs.workflows.diagnose.report import write_figures  # noqa: E402
 from phs.workflows.recording import Recording
 from systems.curling_hasel import curling_hasel
 
@@ -66,9 +66,5 @@ if aug is not None:
           + ", ".join(f"{k} = {aug.values[k]:.3g}" for k in aug.augmentation.free))
 
 # %% Figures
-os.makedirs(args.out, exist_ok=True)
-for name, png in (("fits", figure_fits(d)), ("hypotheses", figure_hypotheses(d)), ("locate", figure_locate(d))):
-    if png:
-        with open(os.path.join(args.out, f"diagnose_curling_hasel_{name}.png"), "wb") as fh:
-            fh.write(png)
-print(f"wrote {os.path.join(args.out, 'diagnose_curling_hasel_*.png')}")
+for path in write_figures(d, args.out, "diagnose_curling_hasel"):
+    print(f"wrote {path}")

@@ -28,7 +28,7 @@ if not os.path.isfile(DATA):
     sys.exit(0)
 
 from phs.workflows.diagnose import diagnose  # noqa: E402
-from phs.workflows.diagnose.report import figure_fits, figure_hypotheses, figure_locate  # noqa: E402
+from phs.workflows.diagnose.report import write_figures  # noqa: E402
 from phs.workflows.recording import Recording  # noqa: E402
 from systems.examples import mass_spring_damper  # noqa: E402
 
@@ -62,9 +62,5 @@ print(d)
 print(f"diagnose: {time.perf_counter() - wall:.1f} s wall")
 
 # %% Figures
-os.makedirs(args.out, exist_ok=True)
-for name, png in (("fits", figure_fits(d)), ("hypotheses", figure_hypotheses(d)), ("locate", figure_locate(d))):
-    if png:
-        with open(os.path.join(args.out, f"diagnose_silverbox_{name}.png"), "wb") as fh:
-            fh.write(png)
-print(f"wrote {os.path.join(args.out, 'diagnose_silverbox_*.png')}")
+for path in write_figures(d, args.out, "diagnose_silverbox"):
+    print(f"wrote {path}")

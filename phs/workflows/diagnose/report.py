@@ -179,14 +179,34 @@ def to_json(d) -> str:
     return json.dumps(clean(d.to_dict()), indent=2, default=_json_default)
 
 
+def figures(d) -> dict:
+    """The diagnosis' figures as PNG bytes: ``fits``, ``hypotheses`` and, when something was located,
+    ``locate``."""
+    figs = {"fits": figure_fits(d), "hypotheses": figure_hypotheses(d)}
+    loc = figure_locate(d)
+    if loc:
+        figs["locate"] = loc
+    return figs
+
+
+def write_figures(d, directory, prefix: str) -> list[str]:
+    """Write :func:`figures` as ``{prefix}_{name}.png`` into ``directory`` (created if missing; each
+    file written under a temporary name and renamed into place); returns the paths."""
+    directory = os.fspath(directory)
+    os.makedirs(directory, exist_ok=True)
+    paths = []
+    for name, png in figures(d).items():
+        path = os.path.join(directory, f"{prefix}_{name}.png")
+        write_atomic(path, png)
+        paths.append(path)
+    return paths
+
+
 def write_report(d, directory) -> None:
     """``index.html`` (figures embedded), ``fits.png``, ``hypotheses.png``, ``locate.png``,
     ``diagnosis.json`` and ``summary.txt`` in ``directory`` (created if missing; each file atomic)."""
     directory = os.fspath(directory)
-    figs = {"fits.png": figure_fits(d), "hypotheses.png": figure_hypotheses(d)}
-    loc = figure_locate(d)
-    if loc:
-        figs["locate.png"] = loc
+    figs = {f"{name}.png": png for name, png in figures(d).items()}
     text = d.summary()
     js = to_json(d)
     checks = d.structure_checks()
