@@ -62,12 +62,14 @@ class PorousLeak(Candidate):
 
 
 def recording(name: str) -> Recording:
-    """Pressure record of one chamber from the moment its supply valve closes (the highest pressure in
-    the first 20 s: before it the supply holds the pressure), on a uniform 0.1 s grid (the files
-    have a few late samples); the supply is closed throughout (input q = 0)."""
+    """Pressure record of one chamber from the moment its supply valve closes (the last sample of the
+    first 20 s within 10 mbar of the highest pressure: until then the supply holds the pressure), on
+    a uniform 0.1 s grid (the files have a few late samples); the supply is closed throughout
+    (input q = 0)."""
     raw = np.genfromtxt(os.path.join(DATA, f"chamber_leak_{name}.csv"), delimiter=",", names=True)
     t, p = raw["time_ms"] / 1000.0, raw["pressure_bar"] * 1e5
-    i0 = int(np.argmax(np.where(t <= 20.0, p, -np.inf)))
+    early = t <= 20.0
+    i0 = int(np.nonzero(early & (p >= p[early].max() - 1e3))[0][-1])
     t = t[i0:] - t[i0]
     keep = t <= (60.0 if args.quick else t[-1])
     return Recording.from_arrays(t[keep], {"q": 0 * t[keep], "pressure": p[i0:][keep]},
