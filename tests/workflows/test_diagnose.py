@@ -19,7 +19,7 @@ import pytest
 from examples.concealed_effects import EFFECTS, NOMINAL_FREE, generate
 from phs.errors import InputDataError, ParameterError
 from phs.workflows.cli import main
-from phs.workflows.diagnose import diagnose, noise_level
+from phs.workflows.diagnose import FRICTION_LIKE, diagnose, noise_level, presliding_share
 from systems.electrostatic_actuator import electrostatic_actuator
 
 SECONDS = 3.0
@@ -55,6 +55,9 @@ def test_verdict_names_the_concealed_effect(effect):
     # the augmented model is still port-Hamiltonian and passive: J skew, R PSD (checked symbolically
     # where decidable, else sampled), H bounded below
     assert d.structure_checks()["ok"]
+    if effect == "hysteresis":
+        # a loop of the material spans the motion: far from the pre-sliding regime of friction (measured 2.1)
+        assert presliding_share(d.nominal, d.accepted[0], d.data) > 4 * FRICTION_LIKE
     doc = d.to_dict()
     assert doc["verdict"]["effect"] == effect and 0.0 <= doc["verdict"]["confidence"] <= 1.0
     assert doc["hypotheses"][0]["effect"] == effect

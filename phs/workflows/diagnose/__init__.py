@@ -195,7 +195,20 @@ def presliding_share(nominal, h, data) -> float | None:
     divided by the standard deviation of the displacement its momentum moves (along the nominal
     fit: its velocity ∂H/∂p integrated); None for other effects or grouped attachments.
     Small (≪ 1): the loop closes within a tiny part of the motion — pre-sliding friction; of order
-    one or more: the loop spans the motion — hysteresis of the material or the structure."""
+    one or more: the loop spans the motion — hysteresis of the material or the structure.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from systems.examples import rc_circuit
+    >>> from codegen import simulate
+    >>> from phs.workflows.recording import Recording
+    >>> t = np.linspace(0, 0.02, 401); u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
+    >>> y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+    >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"])
+    >>> presliding_share(d.nominal, d.accepted[0], d.data) is None   # an offset, not a hysteresis
+    True
+    """
     from phs.workflows.diagnose.hypotheses import train_result
 
     aug = h.augmentation
@@ -250,6 +263,32 @@ def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
     return out
 
 
+def _for_refit(h):
+    """A screened hypothesis' augmentation, started from its screening values for the joint refit."""
+    aug = h.augmentation
+    if aug.element is None:
+        aug = replace(aug, system=aug.system.with_params({k: v for k, v in h.values.items() if k in aug.system.param_names}),
+                      starts=())
+    return aug
+
+
+def _refit_friction_rival(current, hyps, pick, data, progress, label):
+    """When a friction-like hysteresis wins (:data:`FRICTION_LIKE`) and Coulomb friction at the same
+    momentum was only screened, refit it jointly so that :func:`_pick` can weigh the two alike."""
+    if pick is None or pick.augmentation.effect != "hysteresis":
+        return False
+    share = presliding_share(current, pick, data)
+    if share is None or share >= FRICTION_LIKE:
+        return False
+    rivals = [h for h in hyps if h.ok and h.stage != "full" and h.augmentation.effect == "coulomb_friction"
+              and h.augmentation.attached_to == pick.augmentation.attached_to]
+    if not rivals:
+        return False
+    full = _run_all(current, [_for_refit(rivals[0])], data, 1, progress, label + " joint refit")[0]
+    hyps[hyps.index(rivals[0])] = full
+    return True
+
+
 def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top):
     """Screen every hypothesis by a loose joint fit (few iterations, input elements by their search alone),
     then refit the ``refit_top`` most promising to convergence."""
@@ -262,13 +301,7 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top):
         if h.ok and h.augmentation.effect not in seen and len(top) < refit_top:
             top.append(h)
             seen.add(h.augmentation.effect)
-    refits = []
-    for h in top:
-        aug = h.augmentation
-        if aug.element is None:
-            aug = replace(aug, system=aug.system.with_params({k: v for k, v in h.values.items() if k in aug.system.param_names}),
-                          starts=())
-        refits.append(aug)
+    refits = [_for_refit(h) for h in top]
     full = _run_all(current, refits, data, n_jobs, progress, label + " joint refit")
     done = {(f.augmentation.effect, f.augmentation.attached_to) for f in full}
     rest = [h for h in screened if (h.augmentation.effect, h.augmentation.attached_to) not in done]
@@ -432,6 +465,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if round_ == 0:
             all_hyps = hyps
         pick = _pick(current, hyps, data_r)
+        if _refit_friction_rival(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
+            hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
+            pick = _pick(current, hyps, data_r)
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
             hyps.insert(0, pick)
@@ -494,4 +530,5 @@ def _verdict(nominal, accepted, hyps, findings, outs) -> dict:
             "confidence": round(conf, 3)}
 
 
-__all__ = ["diagnose", "Diagnosis", "noise_level", "MIN_BIC_GAIN", "MIN_VALIDATION_GAIN", "SUFFICIENT_MARGIN"]
+__all__ = ["diagnose", "Diagnosis", "noise_level", "presliding_share", "MIN_BIC_GAIN", "MIN_VALIDATION_GAIN", "SUFFICIENT_MARGIN",
+           "FRICTION_LIKE"]
