@@ -24,3 +24,16 @@ def test_quick_benchmark_reports_json_and_final_states_agree():
     assert all(v > 0 for v in figures["codegen_seconds"].values())
     for key in ("ratio_vs_bdf", "ratio_vs_lsoda", "seconds_ours", "seconds_bdf", "seconds_lsoda"):
         assert figures[key] > 0, key
+
+
+def test_sampled_inputs_benchmark_windows_are_closer_to_the_signal():
+    """bench/sampled_inputs.py --quick: the spline windows follow the exact sine at least as well as the
+    linear interpolant, and both identifications land at the truth (k = 50 to 1e-4)."""
+    script = SCRIPT.parent / "sampled_inputs.py"
+    proc = subprocess.run([sys.executable, str(script), "--quick"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    figures = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert figures["windows"]["error_of_peak"] <= figures["linear"]["error_of_peak"] <= 1e-4
+    for rule in ("windows", "linear"):
+        assert abs(figures[rule]["identify_k"] - 50.0) <= 5e-3
+        assert figures[rule]["simulate_seconds"] > 0 and figures[rule]["identify_seconds"] > 0

@@ -209,6 +209,8 @@ def presliding_share(nominal, h, data) -> float | None:
     >>> presliding_share(d.nominal, d.accepted[0], d.data) is None   # an offset, not a hysteresis
     True
     """
+    from scipy.integrate import cumulative_trapezoid
+
     from phs.workflows.diagnose.hypotheses import train_result
 
     aug = h.augmentation
@@ -227,8 +229,7 @@ def presliding_share(nominal, h, data) -> float | None:
     i = s.state_names.index(aug.attached_to)
     grad = s.with_params(nominal.values).lambdify(s.grad_H[i], with_u=False)
     v = np.broadcast_to(np.asarray(grad(X.T), dtype=float).reshape(-1), (len(X),)) if len(X) else np.zeros(0)
-    t = np.asarray(res.t)
-    disp = np.concatenate([[0.0], np.cumsum(np.diff(t) * (v[1:] + v[:-1]) / 2)])
+    disp = cumulative_trapezoid(v, np.asarray(res.t), initial=0.0)
     stroke = float(np.std(disp))
     return float(F / (k * (1 + eta)) / stroke) if stroke > 0 else math.inf
 
