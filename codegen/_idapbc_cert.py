@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
+from codegen._named import find_named
 from phs.errors import PHSError
 
 
@@ -67,6 +68,7 @@ class CertificateReport:
 
     Examples
     --------
+    >>> from codegen._named import find_named
     >>> from codegen.idapbc import design
     >>> from systems.examples import mass_spring_damper
     >>> rep = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).certify(rays=8, simulations=2)
@@ -84,10 +86,7 @@ class CertificateReport:
         return all(c.passed for c in self.items)
 
     def __getitem__(self, name: str) -> Certificate:
-        for c in self.items:
-            if c.name == name:
-                return c
-        raise KeyError(f"no certificate {name!r}; certificates: {', '.join(c.name for c in self.items)}")
+        return find_named(self.items, name, "certificate")
 
     def text(self) -> str:
         head = f"Certificates of the IDA-PBC controller for {self.controller.system.name!r}: " + (

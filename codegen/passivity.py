@@ -75,6 +75,7 @@ import scipy.linalg
 import scipy.optimize
 import sympy as sp
 
+from codegen._named import find_named
 from codegen.functions import generate
 from codegen.translate import Translator
 from phs.errors import EquilibriumError, InputDataError
@@ -202,10 +203,7 @@ class PassivityReport:
                 and all(names[n].verdict == "pass" for n in self.REQUIRED if n in names))
 
     def __getitem__(self, name: str) -> PassivityTest:
-        for t in self.tests:
-            if t.name == name:
-                return t
-        raise KeyError(f"no test {name!r}; tests: {', '.join(t.name for t in self.tests)}")
+        return find_named(self.tests, name, "test")
 
     def to_dict(self) -> dict:
         """JSON-ready summary: top-level ``passive`` and ``margin``, one entry per test under ``tests``."""
