@@ -207,13 +207,13 @@ class PassivityReport:
 
     def to_dict(self) -> dict:
         """JSON-ready summary: top-level ``passive`` and ``margin``, one entry per test under ``tests``."""
-        import phs
+        from phs._version import __version__
 
         return _jsonable({
             "system": self.system.name, "model_hash": self.system.model_hash(), "passive": self.passive,
             "margin": self.margin, "box": {k: list(v) for k, v in self.box.items()}, "params": self.params,
             "tests": {t.name: t.to_dict() for t in self.tests},
-            "provenance": {"phs_version": phs.__version__, "casadi_version": ca.__version__, **self.info},
+            "provenance": {"phs_version": __version__, "casadi_version": ca.__version__, **self.info},
         })
 
     def text(self) -> str:

@@ -6,6 +6,7 @@ diagnosis, sweeps) are exposed lazily so ``import phs`` never imports casadi.
 """
 
 from phs import signals
+from phs._version import __version__  # noqa: F401  (re-exported)
 from phs.component import Component, symbol_of_input, symbol_of_output, symbol_of_state
 from phs.equilibria import EquilibriumResult, equilibrium
 from phs.errors import (
@@ -24,8 +25,6 @@ from phs.junctions import bond, feedback_link, parallel, series
 from phs.params import Condition, InputInfo, Measured, Param, StateInfo
 from phs.subsystem import feedback
 from phs.system import PHSystem
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Component", "symbol_of_input", "symbol_of_output", "symbol_of_state", "DomainError", "EquilibriumError", "InputDataError",
