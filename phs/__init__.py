@@ -20,10 +20,10 @@ from phs.errors import (
     SimulationError,
     UnitError,
 )
+from phs.feedback import feedback
 from phs.interconnect import interconnect
 from phs.junctions import bond, feedback_link, parallel, series
 from phs.params import Condition, InputInfo, Measured, Param, StateInfo
-from phs.subsystem import feedback
 from phs.system import PHSystem
 
 __all__ = [

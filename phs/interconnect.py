@@ -27,6 +27,7 @@ from phs.component import Component, Piece, Port
 from phs.errors import InterconnectionError, ModelError
 from phs.junctions import Junction
 from phs.params import Condition, EnergyTerm, Measured, Param
+from phs.subsystem import subsystem_piece
 from phs.system import PHSystem
 
 
@@ -85,8 +86,6 @@ def interconnect(
 
 def _piece_of(c) -> Piece:
     if isinstance(c, PHSystem):
-        from phs.subsystem import subsystem_piece
-
         return subsystem_piece(c)
     if isinstance(c, Component):
         try:
