@@ -2,14 +2,26 @@
 
 Systems are session-scoped (a PHSystem is immutable, so sharing is safe) and
 may be used in hypothesis tests, which refuse function-scoped fixtures.
+
+Hypothesis runs under the profile ``ci`` unless ``HYPOTHESIS_PROFILE`` names another:
+derandomized (the same examples on every run and machine), no example database (nothing is
+written into the checkout), no deadline (timings vary on shared machines).  ``HYPOTHESIS_PROFILE=explore``
+draws fresh random examples, still without a database, for a search beyond the fixed examples.
 """
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from systems.examples import duffing_oscillator, mass_spring_damper, rc_circuit, rlc_circuit
+
+settings.register_profile("ci", derandomize=True, database=None, deadline=None)
+settings.register_profile("explore", derandomize=False, database=None, deadline=None)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 SEED = 20240611
 

@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import inspect
+import os
 import re
 import subprocess
 import sys
@@ -159,3 +160,26 @@ def test_keyword_overrides_reject_unknown_names(rc):
 def test_importing_the_core_does_not_import_casadi():
     code = "import sys, phs, components, systems; sys.exit('casadi' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
+
+
+def test_every_property_test_is_derandomized_and_writes_no_database():
+    """Each ``@given`` test, with its own ``@settings`` merged over the profile of ``tests/conftest.py``,
+    draws the same examples on every run and keeps no example database in the checkout."""
+    import importlib
+    import pathlib
+
+    if os.environ.get("HYPOTHESIS_PROFILE", "ci") != "ci":
+        pytest.skip("another hypothesis profile was chosen")
+    root = pathlib.Path(__file__).parent
+    found = 0
+    for path in sorted(root.rglob("test_*.py")):
+        if "@given" not in path.read_text():
+            continue
+        name = ".".join(path.relative_to(root.parent).with_suffix("").parts)
+        module = sys.modules.get(name) or importlib.import_module(name)
+        for attr in vars(module).values():
+            s = getattr(attr, "_hypothesis_internal_use_settings", None)
+            if s is not None and getattr(attr, "is_hypothesis_test", False):
+                found += 1
+                assert s.derandomize and s.database is None, f"{name}.{attr.__name__}: {s}"
+    assert found >= 13
