@@ -15,6 +15,7 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import UnitError
+from phs.storage_bound import bounded_below
 from phs.units import DIMENSIONLESS, JOULE, dimension, format_dim, parse_unit
 
 
@@ -183,22 +184,9 @@ def check_system(system, samples: int = 200, seed: int = 0):
                 {k: float(v) for k, v in worst["point"].items()},
             ))
 
-    # H bounded below over the declared state box
-    fH = system.lambdify(system.H)
-    zero_u = [0.0] * len(system.inputs)
-    pv = system.param_vector()
-    best = None
-    for x, _ in _points(system, samples, seed, False):
-        with np.errstate(all="ignore"):
-            h = float(np.asarray(fH(x, zero_u, pv), dtype=float))
-        if np.isfinite(h) and (best is None or h < best[0]):
-            best = (h, x)
-    if best is None:
-        items.append(CheckItem("H bounded below", "undecided", "sampled", "H is not finite at any sampled point"))
-    else:
-        items.append(CheckItem("H bounded below", "pass", f"sampled ({samples} points)",
-                               f"minimum {best[0]:.6g} J over the state box",
-                               {s.name: float(v) for s, v in zip(system.states, best[1])}))
+    # H bounded below: symbolic where possible, else minimised over the state box and followed outward
+    bound = bounded_below(system, samples=samples, seed=seed)
+    items.append(CheckItem("H bounded below", bound.verdict, bound.method, bound.detail, bound.point))
 
     # units
     try:
@@ -210,6 +198,7 @@ def check_system(system, samples: int = 200, seed: int = 0):
 
     # validity domain coverage
     if system.conditions:
+        zero_u, pv = [0.0] * len(system.inputs), system.param_vector()
         fc = system.lambdify([c.expr for c in system.conditions])
         inside = 0
         total = 0
