@@ -1,0 +1,137 @@
+"""The passivity certificate of one system (:class:`PassivityReport`): verdict, margin, JSON, text and HTML."""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+
+import casadi as ca
+
+from codegen._named import find_named
+from codegen.passivity._figures import _figures
+from codegen.passivity._result import PassivityTest, _fmt_point, _jsonable
+from phs.errors import InputDataError
+from phs.io import write_atomic
+
+
+class PassivityReport:
+    """Passivity certificate of one system: the tests, their verdicts and the margin.
+
+    Attributes
+    ----------
+    passive : bool
+        True when no test failed and the interconnection, dissipation, feedthrough and storage tests passed.
+    tests : list of PassivityTest
+    margin : float
+        Smallest scaled eigenvalue of R over the box, or the (negative) one of ``[[R, P], [P^T, S]]`` when that
+        has one: its sign is the dissipation verdict (scaling in :mod:`codegen.passivity`).
+
+    Examples
+    --------
+    >>> from codegen.passivity import certify
+    >>> from systems.examples import rlc_circuit
+    >>> rep = certify(rlc_circuit(), samples=64, starts=1)
+    >>> rep.passive, [t.verdict for t in rep.tests], round(rep.margin, 6)
+    (True, ['pass', 'pass', 'pass', 'pass'], 1.0)
+    >>> rep.to_dict()["tests"]["dissipation"]["verdict"]
+    'pass'
+    """
+
+    REQUIRED = ("interconnection", "dissipation", "feedthrough", "storage")
+
+    def __init__(self, system, tests, margin: float, box: dict, params: dict, info: dict | None = None):
+        self.system = system
+        self.tests = list(tests)
+        self.margin = float(margin)
+        self.box = dict(box)
+        self.params = dict(params)
+        self.info = dict(info or {})
+
+    @property
+    def passive(self) -> bool:
+        names = {t.name: t for t in self.tests}
+        return (all(t.verdict != "fail" for t in self.tests)
+                and all(names[n].verdict == "pass" for n in self.REQUIRED if n in names))
+
+    def __getitem__(self, name: str) -> PassivityTest:
+        return find_named(self.tests, name, "test")
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary: top-level ``passive`` and ``margin``, one entry per test under ``tests``."""
+        from phs._version import __version__
+
+        return _jsonable({
+            "system": self.system.name, "model_hash": self.system.model_hash(), "passive": self.passive,
+            "margin": self.margin, "box": {k: list(v) for k, v in self.box.items()}, "params": self.params,
+            "tests": {t.name: t.to_dict() for t in self.tests},
+            "provenance": {"phs_version": __version__, "casadi_version": ca.__version__, **self.info},
+        })
+
+    def text(self) -> str:
+        head = (f"Passivity of {self.system.name!r} (model {self.system.model_hash()}): "
+                f"{'PASSIVE' if self.passive else 'NOT CERTIFIED PASSIVE'}; margin {self.margin:.4g}")
+        varied = [k for k in self.box if k not in self.system.state_names]
+        box = (f"box: {len(self.system.states)} states" + (f" and parameters {', '.join(varied)}" if varied else "")
+               + " (declared ranges unless given); other parameters at their values")
+        return "\n".join([head, "  " + box] + [t.line() for t in self.tests])
+
+    def __str__(self) -> str:
+        return self.text()
+
+    def __repr__(self) -> str:
+        verdicts = ", ".join(f"{t.name}={t.verdict}" for t in self.tests)
+        return f"PassivityReport({self.system.name!r}, passive={self.passive}, margin={self.margin:.4g}, {verdicts})"
+
+    _repr_pretty_ = lambda self, p, cycle: p.text(self.text())  # noqa: E731
+
+    def figures(self) -> dict[str, bytes]:
+        """PNG figures of the tests that have data to plot, by file name."""
+        return _figures(self)
+
+    def write_report(self, directory) -> list[str]:
+        """Write ``report.html`` (with the figures inline), ``report.json``, ``report.txt`` and the PNG figures.
+
+        Everything is rendered in memory first and each file is written atomically; the directory is
+        created if its parent exists.  Returns the paths written.
+        """
+        import os
+
+        directory = os.fspath(directory)
+        parent = os.path.dirname(os.path.abspath(directory))
+        if not os.path.isdir(parent):
+            raise InputDataError(f"cannot write the report into {directory!r}: directory {parent!r} does not exist")
+        if os.path.exists(directory) and not os.path.isdir(directory):
+            raise InputDataError(f"cannot write the report into {directory!r}: it exists and is not a directory")
+        figs = self.figures()
+        files = {"report.json": json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n",
+                 "report.txt": self.text() + "\n", "report.html": _html(self, figs), **figs}
+        os.makedirs(directory, exist_ok=True)
+        paths = []
+        for name, data in files.items():
+            path = os.path.join(directory, name)
+            write_atomic(path, data)
+            paths.append(path)
+        return paths
+
+
+def _html(report: PassivityReport, figs: dict[str, bytes]) -> str:
+    esc = html.escape
+    rows = []
+    for t in report.tests:
+        color = {"pass": "#2a7", "fail": "#c33", "undecided": "#c90"}[t.verdict]
+        rows.append(f"<tr><td>{esc(t.name)}</td><td style='color:{color};font-weight:bold'>{t.verdict}</td>"
+                    f"<td>{esc(t.summary)}</td><td>{esc(t.element)}</td><td>{esc(_fmt_point(t.worst))}</td>"
+                    f"<td>{esc(t.method)}</td></tr>")
+    imgs = "".join(f"<h2>{esc(n[:-4])}</h2><img alt='{esc(n)}' src='data:image/png;base64,"
+                   f"{base64.b64encode(png).decode()}'/>" for n, png in figs.items())
+    verdict = "PASSIVE" if report.passive else "NOT CERTIFIED PASSIVE"
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>Passivity of {esc(report.system.name)}</title>"
+            "<style>body{font-family:sans-serif;margin:2em}td,th{border:1px solid #ccc;padding:4px;vertical-align:top}"
+            "table{border-collapse:collapse}</style></head><body>"
+            f"<h1>Passivity of {esc(report.system.name)}: {verdict}</h1>"
+            f"<p>model hash {esc(report.system.model_hash())}; margin {report.margin:.4g} (smallest scaled eigenvalue "
+            f"of [[R, P], [P^T, S]] over the box)</p>"
+            "<table><tr><th>test</th><th>verdict</th><th>numbers</th><th>element</th><th>worst point</th><th>method</th></tr>"
+            + "".join(rows) + "</table>" + imgs
+            + f"<h2>JSON</h2><pre>{esc(json.dumps(report.to_dict(), indent=1))}</pre></body></html>\n")
