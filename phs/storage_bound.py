@@ -159,12 +159,21 @@ def _minimise(evaluate, X, lo, hi):
     return best_x, best_h
 
 
-def _falls_without_bound(evaluate, x, h_min, lo, hi):
+def follow_outward(evaluate, x, h_min, lo, hi):
     """Follow H outward from ``x``: along the normal of the box faces it lies on, and along each state axis.
 
     Returns ``(on_face_falling, elsewhere_falling, h_far, x_far)``: a direction "falls without
     bound" when H at its far end is below the box's minimum and its last drops, as the distance
-    doubles, are positive and do not shrink (a function that levels off has shrinking drops)."""
+    doubles, are positive and do not shrink (a function that levels off has shrinking drops).
+    ``evaluate(X)`` gives H at the rows of X (NaN where the model is not defined).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = lambda X: -X[:, 0] ** 4
+    >>> follow_outward(f, np.array([1.0]), -1.0, np.array([-1.0]), np.array([1.0]))[:2]
+    (True, False)
+    """
     width = hi - lo
     tol = 1e-6 * width
     normal = np.where(x >= hi - tol, 1.0, 0.0) - np.where(x <= lo + tol, 1.0, 0.0)
@@ -222,7 +231,7 @@ def bounded_below(system, samples: int = 200, seed: int = 0) -> Bound:
     if x is None:
         return Bound("undecided", f"sampled ({samples} points)", "H is not finite at any valid point of the state box")
     point = {n: float(v) for n, v in zip(names, x)}
-    on_face, beyond, h_far, x_far = _falls_without_bound(evaluate, x, h, lo, hi)
+    on_face, beyond, h_far, x_far = follow_outward(evaluate, x, h, lo, hi)
     method = f"numeric ({samples} samples + L-BFGS-B over the state box, followed {REACH:g} box widths outward)"
     far = ", ".join(f"{n} = {v:.4g}" for n, v in zip(names, x_far) if v != point[n])
     if on_face:

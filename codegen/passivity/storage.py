@@ -8,6 +8,23 @@ from codegen.passivity._box import _Box, _point, _valid
 from codegen.passivity._model import _Model
 from codegen.passivity._result import PassivityTest
 from codegen.passivity._search import _minimise
+from phs.storage_bound import follow_outward
+
+
+def _outward(model: _Model, box: _Box, argmin: np.ndarray, hmin: float):
+    """:func:`phs.storage_bound.follow_outward` in the state coordinates, the parameters at the argmin's."""
+    nx = model.nx
+
+    def evaluate(Z):
+        Vz = np.repeat(argmin[None, :], len(Z), axis=0)
+        Vz[:, :nx] = Z
+        Xz, Pz = box.points(Vz, nx)
+        with np.errstate(all="ignore"):
+            h = np.where(_valid(model, box, Xz, Pz), model.H(Xz, Pz), np.nan)
+        return np.where(np.isfinite(h), h, np.nan)
+
+    on_face, beyond, h_far, x_far = follow_outward(evaluate, argmin[:nx], hmin, box.lo[:nx], box.hi[:nx])
+    return on_face, beyond, h_far, np.concatenate([x_far, argmin[nx:]])
 
 
 def _storage(model: _Model, box: _Box, V, X, P, valid, starts, seed, checks) -> PassivityTest:
@@ -49,7 +66,18 @@ def _storage(model: _Model, box: _Box, V, X, P, valid, starts, seed, checks) -> 
                     "argmin_on_boundary": on_edge,
                     "energy_terms_at_argmin": {t.label: float(v) for t, v in zip(system.energy_terms, terms)}})
     method = f"sampled {len(V)} valid points of the box and minimised with nlpsol (IPOPT) from {runs} starts"
-    edge = (f"; the minimum lies on the box boundary in {', '.join(on_edge)} (H may decrease further outside the box)"
+    on_face, beyond, h_far, x_far = _outward(model, box, argmin, hmin)
+    numbers["H_far"] = h_far
+    if on_face or beyond:
+        far = ", ".join(f"{n} = {v:.4g}" for n, v, a in zip(box.names, x_far, argmin) if v != a)
+        why = (f"H is unbounded below: its minimum {hmin:.6g} J on the box lies on the box's face and H keeps falling "
+               f"outward ({h_far:.6g} J at {far})" if on_face else
+               f"bounded on the stated box only: minimum {hmin:.6g} J inside it, but H is unbounded below outside it "
+               f"({h_far:.6g} J at {far})")
+        return PassivityTest("storage", "fail" if on_face else "undecided", method + ", followed outward", why + note,
+                             numbers, _point(box, argmin), "energy term(s) " + ", ".join(t.label for t in system.energy_terms),
+                             {"H": Hs, "V": V, "names": box.names, "ends": ends})
+    edge = (f"; the minimum lies on the box boundary in {', '.join(on_edge)}, where H levels off or the model ends"
             if on_edge else "")
     return PassivityTest("storage", "pass", method,
                          f"H ≥ H_min = {hmin:.6g} J on the box, so H − H_min is a nonnegative storage function{edge}{note}",

@@ -511,3 +511,19 @@ def test_hamiltonian_crossings_are_where_the_popov_function_vanishes():
     assert sorted(cross[cross > 0]) == pytest.approx(expected, rel=1e-8)
     below, _ = _hamiltonian_crossings(ss.A, ss.B, ss.C, ss.D, np.array([[0.0, 0.5], [0.5, 1e-6]]))
     assert not np.any(below > 0)  # just below the index ν = 0: no crossing
+
+
+@pytest.mark.parametrize("potential, verdict", [(lambda q: -q**4, "fail"), (lambda q: -q**2 / 2, "fail"),
+                                                (lambda q: q**2 - q**4 / 100, "undecided"), (lambda q: -sp.tanh(q), "pass"),
+                                                (lambda q: q**4 / 4 - q**2 / 2, "pass")])
+def test_storage_test_agrees_with_the_structural_check(potential, verdict):
+    """The certificate's storage test and ``PHSystem.check()`` reach the same verdict on H bounded below;
+    an H unbounded below is never certified passive."""
+    q, p = sp.Symbol("q", real=True), sp.Symbol("p", real=True)
+    H = potential(q) + p**2 / 2
+    system = PHSystem("osc", [StateInfo("q", range=(-1, 1)), StateInfo("p", kind="I")], H=H, J=[[0, 1], [-1, 0]],
+                      R=[[0, 0], [0, 1]], G=[[0], [1]], inputs=["F"])
+    report = certify(system, samples=64, starts=2)
+    assert report["storage"].verdict == verdict
+    assert system.check()["H bounded below"].verdict == verdict
+    assert report.passive == (verdict == "pass")
