@@ -128,22 +128,12 @@ class SimulationResult:
 
     def __getitem__(self, name: str) -> np.ndarray:
         s = self.system
-        if name in s.state_names:
-            return self.x[:, s.state_names.index(name)]
-        if name in s.input_names:
-            return self.u[:, s.input_names.index(name)]
-        if name in s.output_names:
-            return self.y[:, s.output_names.index(name)]
-        if name in s.measured_names:
-            return self.measured[:, s.measured_names.index(name)]
-        if name in ("H", "dissipated", "supplied", "dHdt"):
-            return getattr(self, name)
         labels = [t.label for t in s.energy_terms]
-        if name in labels:
-            return self.energy_terms[:, labels.index(name)]
-        if name in self.dissipator_powers:
-            return self.dissipator_powers[name]
-        raise KeyError(f"no signal {name!r} in the result of {s.name!r}; known: {', '.join(self.columns)}")
+        extra = {label: (lambda label=label: self.dissipator_powers[label]) for label, _ in s.dissipators}
+        extra.update({label: (lambda k=k: self.energy_terms[:, k]) for k, label in reversed(list(enumerate(labels)))})
+        extra.update({key: (lambda key=key: getattr(self, key)) for key in ("H", "dissipated", "supplied", "dHdt")})
+        return signal(s, name, x=self.x, u=self.u, y=lambda: self.y, measured=lambda: self.measured, extra=extra,
+                      known=self.columns, where=f" in the result of {s.name!r}")
 
     def table(self) -> tuple[list[str], np.ndarray]:
         """Header (with ``t`` first) and the (nt, 1 + ncolumns) array of every signal."""
@@ -158,6 +148,60 @@ class SimulationResult:
 
     def __repr__(self) -> str:
         return f"SimulationResult({self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g})"
+
+
+def signal(system, name: str, *, x, u, y=None, measured=None, extra=None, known=(), where: str = "") -> np.ndarray:
+    """One named signal of a trajectory: a state, input, port output, measured output or an extra signal.
+
+    The names are looked up in that order: ``system.state_names`` (a column of ``x``), ``input_names`` (of ``u``),
+    ``output_names`` (of ``y``, when given), ``measured_names`` (of ``measured``, when given), then the keys of
+    ``extra``.  ``y``, ``measured`` and the values of ``extra`` may be zero-argument callables, evaluated only
+    when the name is theirs (derived signals cost a CasADi evaluation over the whole grid).
+
+    Parameters
+    ----------
+    system : PHSystem
+    name : str
+    x, u : array (nt, nx), (nt, nu)
+    y, measured : array (nt, k) or callable, optional
+    extra : dict, optional
+        ``{name: array or callable}`` for other signals (energies, powers, controller states).
+    known : sequence of str
+        The names listed by the ``KeyError``.
+    where : str
+        Inserted after the name in the ``KeyError`` (e.g. ``" in the result of 'msd'"``).
+
+    Raises
+    ------
+    KeyError
+        ``no signal 'name'{where}; known: ...`` when the name is none of these.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from systems.examples import mass_spring_damper
+    >>> msd = mass_spring_damper()
+    >>> x, u = np.array([[0.0, 0.1], [0.2, 0.3]]), np.zeros((2, 1))
+    >>> signal(msd, "k.l", x=x, u=u).tolist(), float(signal(msd, "E", x=x, u=u, extra={"E": lambda: 2.0}))
+    ([0.1, 0.3], 2.0)
+    >>> signal(msd, "v", x=x, u=u, known=["m.p", "k.l", "F"])
+    Traceback (most recent call last):
+    ...
+    KeyError: "no signal 'v'; known: m.p, k.l, F"
+    """
+    value = lambda v: v() if callable(v) else v  # noqa: E731
+    s = system
+    if name in s.state_names:
+        return x[:, s.state_names.index(name)]
+    if name in s.input_names:
+        return u[:, s.input_names.index(name)]
+    if y is not None and name in s.output_names:
+        return value(y)[:, s.output_names.index(name)]
+    if measured is not None and name in s.measured_names:
+        return value(measured)[:, s.measured_names.index(name)]
+    if extra and name in extra:
+        return value(extra[name])
+    raise KeyError(f"no signal {name!r}{where}; known: {', '.join(known)}")
 
 
 def write_csv_atomic(path, header, data) -> None:

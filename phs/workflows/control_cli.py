@@ -213,9 +213,9 @@ def run_control(args: argparse.Namespace) -> int:
 
 def _plant_x0(ctrl, system, x0: dict):
     """Initial plant state: the given values, the design's x0 for the controller's states, 0 (clipped) otherwise."""
-    from codegen.idapbc import _state_vector
+    from codegen.idapbc import state_vector
 
-    xs = _state_vector(system, None)
+    xs = state_vector(system, None)
     for nm, v in zip(ctrl.system.state_names, ctrl.x0):
         xs[system.state_names.index(nm)] = v
     for nm, v in x0.items():

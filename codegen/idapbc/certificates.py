@@ -41,6 +41,8 @@ import numpy as np
 import sympy as sp
 
 from codegen._named import find_named
+from codegen.idapbc.closed_loop import simulate_closed_loop
+from codegen.idapbc.linear import closed_loop_modes, leaf_hessian
 from phs.errors import PHSError
 
 
@@ -68,7 +70,6 @@ class CertificateReport:
 
     Examples
     --------
-    >>> from codegen._named import find_named
     >>> from codegen.idapbc import design
     >>> from systems.examples import mass_spring_damper
     >>> rep = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).certify(rays=8, simulations=2)
@@ -120,68 +121,6 @@ def _jsonable(obj):
     if isinstance(obj, np.bool_):
         return bool(obj)
     return obj
-
-
-# -- linear analysis on the leaf ------------------------------------------------------------------
-def _leaf_linear(ctrl):
-    """Closed-loop Jacobian on the leaf at (x*, xi = 0): free state coordinates then integrator states."""
-    lf, n, nxi = ctrl.leaf, ctrl.num.n, ctrl.n_xi
-    x = ctrl.x_star
-    Afull = np.asarray(ctrl._fx["cl_jac"](x, np.zeros(nxi)), dtype=float).reshape(n + nxi, n + nxi)
-    T = lf.tangent(x)
-    F = lf.free
-    top = np.hstack([Afull[F][:, :n] @ T, Afull[F][:, n:]])
-    bottom = np.hstack([Afull[n:, :n] @ T, Afull[n:, n:]])
-    return np.vstack([top, bottom]), T
-
-
-def closed_loop_modes(ctrl) -> np.ndarray:
-    """Eigenvalues of the closed loop linearised on the leaf at ``x*``.
-
-    Examples
-    --------
-    >>> from codegen.idapbc import design
-    >>> from systems.examples import mass_spring_damper
-    >>> ev = closed_loop_modes(design(mass_spring_damper(), {"position": 0.5}, stiffness={"k.l": 6.0}, damping=2.0))
-    >>> np.round(np.sort(ev.real), 6).tolist()   # s**2 + 2.4 s + 10 = 0
-    [-1.2, -1.2]
-    """
-    A, _ = _leaf_linear(ctrl)
-    return np.linalg.eigvals(A) if A.size else np.zeros(0)
-
-
-def static_gain(ctrl, with_reference: bool = False):
-    """DC gain of the target closed loop from an input offset to the passive output ``y_d = g^T dH_d/dx``
-    (and, with ``with_reference``, the bound ``|C| |A^-1| |g|`` it is compared with to call it zero)."""
-    lf = ctrl.leaf
-    x = ctrl.x_star
-    A, T = _leaf_linear(ctrl.with_integral(None) if ctrl.integral else ctrl)
-    g = np.asarray(ctrl._fx["g"](x), dtype=float).reshape(ctrl.num.n, -1)
-    C = np.asarray(ctrl._fx["yd_jac"](x), dtype=float).reshape(-1, ctrl.num.n) @ T
-    sF = ctrl.num.scale[lf.free]
-    try:
-        G = -C @ np.linalg.solve(A, g[lf.free])
-        # the same product in states scaled by their typical magnitudes (mixed units would make it meaningless)
-        As = A * sF[None, :] / sF[:, None]
-        ref = (np.linalg.norm(C * sF[None, :], 2) * np.linalg.norm(np.linalg.inv(As), 2)
-               * np.linalg.norm(g[lf.free] / sF[:, None], 2))
-    except np.linalg.LinAlgError:
-        G, ref = np.full((g.shape[1], g.shape[1]), np.nan), np.nan
-    return (G, ref) if with_reference else G
-
-
-def leaf_hessian(ctrl) -> np.ndarray:
-    """Hessian of ``H_d`` along the leaf at ``x*`` in the free coordinates scaled by their typical magnitudes."""
-    lf, x = ctrl.leaf, ctrl.x_star
-    n = ctrl.num.n
-    T = lf.tangent(x)
-    Hx = np.asarray(ctrl._fx["hess"](x), dtype=float).reshape(n, n)
-    dHd = np.asarray(ctrl._fx["dHd"](x), dtype=float).reshape(n)
-    K = lf.curvature(x)
-    Hs = T.T @ Hx @ T + np.einsum("k,kij->ij", dHd, K)
-    Hs = (Hs + Hs.T) / 2
-    sF = ctrl.num.scale[lf.free]
-    return Hs * sF[:, None] * sF[None, :]
 
 
 # -- sampling on the leaf --------------------------------------------------------------------------
@@ -512,7 +451,7 @@ def _simulations(ctrl, data, c, k, horizon, seed) -> Certificate:
     worst_inc, worst_dist, fails, elsewhere = 0.0, 0.0, [], []
     for x, hd in starts:
         try:
-            res = ctrl.simulate(t, x0=x, rtol=1e-10)
+            res = simulate_closed_loop(ctrl, t, x0=x, rtol=1e-10)
         except PHSError as exc:
             fails.append(str(exc).splitlines()[0][:200])
             continue

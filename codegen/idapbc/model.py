@@ -1,10 +1,11 @@
-"""Design models for IDA-PBC: neglected storages and the numeric functions the design evaluates.
+"""Design models for IDA-PBC: neglected storages, the numeric functions the design evaluates, names.
 
 :func:`neglect_states` builds the model a controller is designed on when some
 storages are left out (a shorted capacitor: the curling HASEL's charge-retention
 branch, whose slow charge the controller then treats as a disturbance).
 :class:`Numeric` evaluates a system's generated CasADi functions at fixed
-parameter values.
+parameter values.  :func:`match_names`, :func:`input_vector` and
+:func:`state_vector` turn the names a user gives into indices and vectors.
 """
 
 from __future__ import annotations
@@ -178,3 +179,50 @@ def input_vector(system: PHSystem, values: dict | None, what: str) -> np.ndarray
         if not np.isfinite(u[system.input_names.index(k)]):
             raise InputDataError(f"{what}: value {v!r} for input {k!r} is not finite")
     return u
+
+
+def state_vector(system: PHSystem, x0=None, what: str = "x0", ignore=()) -> np.ndarray:
+    """Full state vector from ``{name: value}`` or an array, checked; missing states at 0 clipped into their ranges.
+
+    Parameters
+    ----------
+    system : PHSystem
+    x0 : dict, array or None
+        ``{state: value}`` (names in ``ignore`` are skipped), or one value per state; None gives the default.
+    what : str
+        How the value is named in error messages.
+    ignore : sequence of str
+        Names accepted and skipped (states the design left out).
+
+    Raises
+    ------
+    InputDataError
+        For an unknown state, a value that is not a finite number, or an array of the wrong length.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> state_vector(mass_spring_damper(), {"k.l": 0.5})
+    array([0. , 0.5])
+    """
+    base = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in system.states])
+    if x0 is None:
+        return base
+    if isinstance(x0, dict):
+        for k, v in x0.items():
+            if k in ignore:
+                continue
+            if k not in system.state_names:
+                raise InputDataError(f"{what}: system {system.name!r} has no state {k!r}; states: "
+                                     f"{', '.join(system.state_names)}")
+            try:
+                base[system.state_names.index(k)] = float(v)
+            except (TypeError, ValueError):
+                raise InputDataError(f"{what}: value {v!r} of state {k!r} is not a number") from None
+        if not np.all(np.isfinite(base)):
+            raise InputDataError(f"{what}: a value is not finite")
+        return base
+    arr = np.asarray(x0, dtype=float).reshape(-1)
+    if arr.shape != base.shape or not np.all(np.isfinite(arr)):
+        raise InputDataError(f"{what}: expected {base.size} finite values for {system.name!r}, got {arr.size}")
+    return arr

@@ -12,14 +12,13 @@ the trajectory.
 
 from __future__ import annotations
 
-import io
-
 import casadi as ca
 import numpy as np
 
 from codegen.functions import generate
+from codegen.idapbc.model import state_vector
+from codegen.results import signal, write_csv_atomic
 from phs.errors import DomainError, InputDataError, SimulationError
-from phs.io import write_atomic
 
 
 class ClosedLoopResult:
@@ -47,20 +46,8 @@ class ClosedLoopResult:
         self.info = dict(info)
 
     def __getitem__(self, name: str) -> np.ndarray:
-        s = self.system
-        if name in s.state_names:
-            return self.x[:, s.state_names.index(name)]
-        if name in s.input_names:
-            return self.u[:, s.input_names.index(name)]
-        if name in s.measured_names:
-            return self.measured[:, s.measured_names.index(name)]
-        if name == "H_d":
-            return self.H_d
-        if name == "H_cl":
-            return self.H_cl
-        if name == "xi":
-            return self.xi
-        raise KeyError(f"no signal {name!r}; known: {', '.join(self.columns)}")
+        return signal(self.system, name, x=self.x, u=self.u, measured=self.measured,
+                      extra={"H_d": self.H_d, "H_cl": self.H_cl, "xi": self.xi}, known=self.columns)
 
     @property
     def columns(self) -> list[str]:
@@ -90,10 +77,7 @@ class ClosedLoopResult:
         return ["t"] + cols, np.column_stack([self.t] + [self[c] for c in cols])
 
     def to_csv(self, path) -> None:
-        header, data = self.table()
-        buf = io.StringIO()
-        np.savetxt(buf, data, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
-        write_atomic(path, buf.getvalue())
+        write_csv_atomic(path, *self.table())
 
     def plot(self, fig=None, reference=None):
         """Target, inputs and ``H_d`` against time (a matplotlib figure)."""
@@ -173,8 +157,6 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     SimulationError
         When the integrator fails.
     """
-    from codegen.idapbc import _state_vector
-
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or len(t) < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
         raise InputDataError("time grid must be a strictly increasing 1-D array of at least 2 finite values")
@@ -184,10 +166,10 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     sx = fn.sx
     n, m = len(plant.states), len(plant.inputs)
     if x0 is None:
-        xs = _state_vector(plant, None)
+        xs = state_vector(plant, None)
         xs[idx] = ctrl.x0
     else:
-        xs = _state_vector(plant, x0)
+        xs = state_vector(plant, x0)
     nxi = ctrl.n_xi
     xi_start = np.zeros(nxi) if xi0 is None else np.asarray(xi0, dtype=float).reshape(nxi)
     s = np.array([st.typical for st in plant.states])
