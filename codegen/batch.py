@@ -47,10 +47,15 @@ import casadi as ca
 import numpy as np
 
 from codegen import functions as _functions
+from codegen._domain import fmt_state
+from codegen._grid import time_grid
+from codegen._inputs import input_signals, plan_segments
+from codegen._output import check_covered, energy_accounts, energy_columns, output_runs
 from codegen.functions import GeneratedFunctions, generate
 from codegen.results import SimulationResult
-from codegen.simulator import Simulator, _bounded, _fmt_state, _runs
+from codegen.simulator import Simulator
 from phs.errors import DomainError, InputDataError, PHSError, SimulationError
+from phs.signals import Sampled
 
 #: Held while a batch runs.  CasADi releases Python's GIL during its calls, but building functions
 #: (integrators, maps) is not thread-safe: concurrent batches in one process (threads of a Dask worker)
@@ -194,48 +199,24 @@ class _Shape:
 
 def _shape(sim: Simulator, t: np.ndarray, u) -> _Shape:
     """Plan the integrator calls of :meth:`Simulator.run` for the input ``u`` on the grid ``t``."""
-    sigs = sim._signals(u, t)
-    segs, slots = sim._plan(sigs, t)
-    from phs.signals import Sampled
-
+    sigs = input_signals(sim.system, u, t)
+    segs, slots = plan_segments(sigs, t)
     sampled = [(np.asarray(sg.times), np.asarray(sg.values)) if isinstance(sg, Sampled) else None for sg in sigs]
     nt, nu = len(t), len(sigs)
     U = np.zeros((nt, nu))
     U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does
-    if segs:
-        U[0] = sim._eval_inputs(sigs, slots, segs[0][2], t[:1])[0]
-    steps, cs, t_off, u_off, key = [], [], [], [], []
-    for a, b, choice in segs:
-        tol_a, tol_b = 1e-12 * max(1.0, abs(a)), 1e-12 * max(1.0, abs(b))
-        ja = int(np.searchsorted(t, a - tol_a))
-        if ja < nt and abs(t[ja] - a) <= 1e-9 * max(1.0, abs(a)):
-            U[ja] = sim._eval_inputs(sigs, slots, choice, np.array([a]))[0]
-        i0 = int(np.searchsorted(t, a, side="left"))
-        i1 = int(np.searchsorted(t, b, side="left"))
-        idx_in = [i for i in range(i0, min(i1 + 1, nt)) if a < t[i] <= b + tol_b]
-        pts = [a] + [float(t[i]) for i in idx_in]
-        if pts[-1] < b - tol_b:
-            pts.append(b)
-        for ra, rh, rn, ms in _bounded(_runs(pts), sigs):
-            F, layout = sim._integrator(rn, slots, sampled, ms)
-            c = sim._pvec(np.zeros(0), ra, rh, layout, choice)
-            times = ra + rh * np.arange(1, rn + 1)
-            uu = sim._eval_inputs(sigs, slots, choice, times)
-            j = np.minimum(np.searchsorted(t, times - 1e-12 * np.maximum(1.0, np.abs(times))), nt - 1)
-            on = np.abs(t[j] - times) <= 1e-9 * np.maximum(np.maximum(1.0, np.abs(times)), rh)
-            U_check[j[on]] = uu[on]
-            keep = on & (np.abs(times - b) > tol_b)
-            U[j[keep]] = uu[keep]
-            if abs(times[-1] - b) <= tol_b and b >= t[-1] - tol_b:
-                U[j[-1]] = uu[-1]
-            t_off.extend(times[~on])
-            u_off.extend(uu[~on])
-            steps.append(_Step(F, len(c), on, j[on]))
-            cs.append(c)
-            key.append((id(F), len(c), on.tobytes(), j[on].tobytes()))
-    filled = np.concatenate([s.j for s in steps]) if steps else np.zeros(0, dtype=int)
-    if not np.array_equal(filled, np.arange(1, nt)):
-        raise SimulationError("batch evaluation: the integrator's output steps do not cover the time grid once each")
+    runs, steps, cs, t_off, u_off, key = [], [], [], [], [], []
+    for r in output_runs(t, sigs, segs, lambda choice, times: sim._eval_inputs(sigs, slots, choice, times), U):
+        F, layout = sim._integrator(r.n, slots, sampled, r.max_step)
+        c = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
+        r.store(U_check, r.u)
+        t_off.extend(r.times[~r.on])
+        u_off.extend(r.u[~r.on])
+        runs.append(r)
+        steps.append(_Step(F, len(c), r.on, r.j[r.on]))
+        cs.append(c)
+        key.append((id(F), len(c), r.on.tobytes(), r.j[r.on].tobytes()))
+    check_covered(runs, nt, "batch evaluation")
     return _Shape(key=hashlib.sha1(repr(key).encode()).hexdigest(), steps=steps,
                   c=np.concatenate(cs) if cs else np.zeros(0), U=U, U_check=U_check,
                   t_off=np.asarray(t_off, dtype=float), U_off=np.asarray(u_off, dtype=float).reshape(-1, nu))
@@ -244,7 +225,7 @@ def _shape(sim: Simulator, t: np.ndarray, u) -> _Shape:
 def _run_function(sim: Simulator, shape: _Shape, name: str) -> ca.Function:
     """Chain the integrator calls of ``shape`` into one function ``(z0, p, c) -> (Z, [Q], [Z_off])``."""
     nx, npar = len(sim.system.states), len(sim.system.params)
-    nq = 2 + len(sim.system.dissipators) if sim.energy else 0
+    nq = len(energy_columns(sim.system)) if sim.energy else 0
     z0 = ca.MX.sym("z0", nx)
     p = ca.MX.sym("p", npar)
     c = ca.MX.sym("c", len(shape.c))
@@ -388,10 +369,7 @@ class BatchResult:
                  "method": "cvodes", "rtol": self.stats.get("rtol"), "atol": self.stats.get("atol"), "batch": True}
         res = _BatchRun(s, self.t, self.x[k], self.u[k], self.p[k], stats, pre)
         if self.quadratures is not None:
-            Q = self.quadratures[k]
-            res.quadratures = {"E_supplied": Q[:, 0], "E_dissipated": Q[:, 1]}
-            for i, (label, _) in enumerate(s.dissipators):
-                res.quadratures[f"E_dissipated[{label}]"] = Q[:, 2 + i]
+            res.quadratures = energy_accounts(s, self.quadratures[k])
         return res
 
     def __repr__(self) -> str:
@@ -440,15 +418,7 @@ class BatchSimulator:
 
     def __init__(self, system, t, rtol: float = 1e-8, atol: float | None = None, max_steps: int = 20000,
                  compile: bool = False, energy: bool = True, threads: int | None = None):
-        t = np.array(t, dtype=float)
-        if t.ndim != 1 or len(t) < 2:
-            raise InputDataError("time grid must be a 1-D array with at least 2 points")
-        if not np.all(np.isfinite(t)):
-            raise InputDataError(f"time grid has a non-finite value at index {int(np.argmin(np.isfinite(t)))}")
-        d = np.diff(t)
-        if np.any(d <= 0):
-            i = int(np.argmax(d <= 0)) + 1
-            raise InputDataError(f"time grid is not strictly increasing at index {i} (t={t[i]})")
+        t = time_grid(np.array(t, dtype=float))
         if threads is not None and (not isinstance(threads, (int, np.integer)) or threads < 1):
             raise InputDataError(f"threads must be a positive integer, got {threads!r}")
         t.setflags(write=False)
@@ -542,7 +512,7 @@ class BatchSimulator:
         s = self.system
         sim = self.simulator
         nt, nx, nu, npar = len(self.t), len(s.states), len(s.inputs), len(s.params)
-        nq = 2 + len(s.dissipators) if sim.energy else 0
+        nq = len(energy_columns(s)) if sim.energy else 0
 
         def each(v, k):
             return v[k] if isinstance(v, (list, tuple)) else v
@@ -627,7 +597,8 @@ class BatchSimulator:
     def _static(self, params, u, x0, N, errors, P, wall) -> BatchResult:
         """Runs of a system without states, one :meth:`Simulator.run` each."""
         s, nt, nu = self.system, len(self.t), len(self.system.inputs)
-        nq = 2 + len(s.dissipators) if self.simulator.energy else 0
+        columns = energy_columns(s)
+        nq = len(columns) if self.simulator.energy else 0
         U = np.zeros((N, nt, nu))
         Q = np.zeros((N, nt, nq)) if nq else None
         for k in range(N):
@@ -640,10 +611,8 @@ class BatchSimulator:
                 errors[k] = exc
                 continue
             U[k] = res.u
-            if nq:
-                Q[k, :, 0], Q[k, :, 1] = res.quadratures["E_supplied"], res.quadratures["E_dissipated"]
-                for i, (label, _) in enumerate(s.dissipators):
-                    Q[k, :, 2 + i] = res.quadratures[f"E_dissipated[{label}]"]
+            for i, name in enumerate(columns[:nq]):
+                Q[k, :, i] = res.quadratures[name]
         stats = {"seconds": _time.perf_counter() - wall, "rtol": self.simulator.rtol, "atol": self.simulator.atol,
                  "threads": self.threads, "integrator_calls": 0, "shapes": 0}
         return BatchResult(s, self.t, np.zeros((N, nt, 0)), U, P, Q, errors, {}, stats)
@@ -732,7 +701,7 @@ class BatchSimulator:
                 return exc
         if first_bad is not None:
             return SimulationError(f"simulation of {s.name!r}: non-finite state at t={t_all[first_bad]:.6g}: "
-                                   + _fmt_state(s, x_all[first_bad]))
+                                   + fmt_state(s, x_all[first_bad]))
         return None
 
     def _derived(self, signals, X, U, P) -> dict:
