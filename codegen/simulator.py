@@ -18,6 +18,12 @@ Design
 * A state leaving the validity domain, a non-finite value or an integrator
   failure raises an error naming the time and the state; nothing is silently
   truncated.
+
+What this simulator shares with :mod:`codegen.discrete_gradient` and
+:mod:`codegen.batch` lives below all three: input signals and segments
+(:mod:`codegen._inputs`), the time grid and the step windows of sampled inputs
+(:mod:`codegen._grid`), the validity-domain check (:mod:`codegen._domain`) and
+the collection of integrator outputs on the grid (:mod:`codegen._output`).
 """
 
 from __future__ import annotations
