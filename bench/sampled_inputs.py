@@ -38,7 +38,7 @@ from phs.workflows.identify import identify  # noqa: E402
 from phs.workflows.recording import Recording  # noqa: E402
 from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
 
-simmod = importlib.import_module("codegen.simulator")
+simmod = importlib.import_module("codegen._grid")  # the module of step_windows and its step factors
 SIGNAL = "15 + 10*sin(2*pi*1.5*t) + 3*sin(2*pi*4.1*t)"
 FACTORS = simmod._STEP_FACTORS
 

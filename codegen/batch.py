@@ -30,15 +30,15 @@ serialization (:func:`serialize_functions`); unpickling installs them, so a
 worker never re-derives the model symbolically: it only rebuilds the
 integrators from the deserialized expressions, or loads them compiled from the
 disk cache (``compile=True``, :mod:`codegen.compile`).
+
+The pieces: the run function of one input shape (:mod:`codegen._batch_plan`),
+the result (:mod:`codegen._batch_result`), threaded maps and their console
+(:mod:`codegen._mapped`), the functions' serialization
+(:mod:`codegen._serialize`); their public names are importable from here.
 """
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
-import hashlib
-import os
-import sys
 import threading
 import time as _time
 from collections import OrderedDict
@@ -46,372 +46,24 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
-from codegen import functions as _functions
-from codegen.functions import GeneratedFunctions, generate
-from codegen.results import SimulationResult
-from codegen.simulator import Simulator, _bounded, _fmt_state, _runs
+from codegen._batch_plan import Shape, plan_shape, run_function
+from codegen._batch_result import SIGNALS, BatchResult
+from codegen._domain import fmt_state
+from codegen._grid import time_grid
+from codegen._mapped import Mapped, default_threads, quiet
+from codegen._output import energy_columns
+from codegen._serialize import deserialize_functions, serialize_functions
+from codegen.functions import generate
+from codegen.simulator import Simulator
 from phs.errors import DomainError, InputDataError, PHSError, SimulationError
+
+__all__ = ["BatchSimulator", "BatchResult", "LOCK", "SIGNALS", "default_threads", "serialize_functions",
+           "deserialize_functions"]
 
 #: Held while a batch runs.  CasADi releases Python's GIL during its calls, but building functions
 #: (integrators, maps) is not thread-safe: concurrent batches in one process (threads of a Dask worker)
 #: take turns; each batch still evaluates in its own CasADi threads.
 LOCK = threading.RLock()
-
-#: Derived signals that :meth:`BatchSimulator.run` can evaluate for a whole chunk at once.
-SIGNALS = ("measured", "output", "power", "hamiltonian")
-
-
-def default_threads() -> int:
-    """Number of threads used by default: the processors this process may run on.
-
-    Examples
-    --------
-    >>> default_threads() >= 1
-    True
-    """
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
-
-
-# -- transport of generated functions -------------------------------------------------------------
-def serialize_functions(functions: GeneratedFunctions) -> dict:
-    """The generated functions of a system in CasADi's serialization (one stream, shared symbols kept).
-
-    Returns a plain dict (strings and lists) that pickles cheaply; :func:`deserialize_functions`
-    restores it without any symbolic work.
-
-    Examples
-    --------
-    >>> from systems.examples import rc_circuit
-    >>> blob = serialize_functions(generate(rc_circuit()))
-    >>> sorted(blob)[:3], blob["casadi"] == ca.__version__
-    (['casadi', 'data', 'fields'], True)
-    """
-    fields = [f.name for f in dataclasses.fields(GeneratedFunctions) if f.name not in ("system", "sx")]
-    ser = ca.StringSerializer()
-    for name in fields:
-        ser.pack(getattr(functions, name))
-    keys = list(functions.sx)
-    for key in keys:
-        ser.pack(functions.sx[key])
-    return {"casadi": ca.__version__, "fields": fields, "sx_keys": keys, "data": ser.encode()}
-
-
-def deserialize_functions(system, blob: dict, install: bool = True) -> GeneratedFunctions:
-    """Rebuild :class:`GeneratedFunctions` of ``system`` from :func:`serialize_functions` output.
-
-    With ``install`` (default) they become what :func:`codegen.generate` returns for ``system``
-    (and for systems differing from it only in parameter values), so nothing is re-derived.
-
-    Raises
-    ------
-    SimulationError
-        When the blob was written by another CasADi version (its serialization is not portable
-        across versions).
-
-    Examples
-    --------
-    >>> from systems.examples import rc_circuit
-    >>> rc = rc_circuit()
-    >>> f = deserialize_functions(rc, serialize_functions(generate(rc)), install=False)
-    >>> float(f.hamiltonian([1e-6], [0], [1e3, 1e-6]))
-    5e-07
-    """
-    if blob.get("casadi") != ca.__version__:
-        raise SimulationError(f"generated functions of {system.name!r} were serialized by CasADi {blob.get('casadi')} "
-                              f"but this process runs CasADi {ca.__version__}; install the same version everywhere")
-    des = ca.StringDeserializer(blob["data"])
-    funs = {name: des.unpack() for name in blob["fields"]}
-    sx = {key: des.unpack() for key in blob["sx_keys"]}
-    out = GeneratedFunctions(system=system, sx=sx, **funs)
-    if install:
-        _functions._CACHE[system] = out
-        _functions._BY_HASH[system.model_hash()] = out
-    return out
-
-
-class _Discard:
-    """A text stream that drops what it is given."""
-
-    def write(self, text: str) -> int:
-        return len(text)
-
-    def flush(self) -> None:
-        pass
-
-
-_QUIET_LOCK = threading.Lock()
-_QUIET = {"depth": 0, "saved": None}
-
-
-@contextlib.contextmanager
-def _quiet():
-    """Silence CasADi's diagnostics (failed runs are reported as PHS errors instead).
-
-    CasADi prints through Python's ``sys.stdout``/``sys.stderr``; they are swapped once for all
-    threads inside (a per-call ``redirect_stdout`` would, with several threads, restore another
-    thread's sink and lose the console for good).
-    """
-    with _QUIET_LOCK:
-        if _QUIET["depth"] == 0:
-            _QUIET["saved"] = (sys.stdout, sys.stderr)
-            sys.stdout = sys.stderr = _Discard()
-        _QUIET["depth"] += 1
-    try:
-        yield
-    finally:
-        with _QUIET_LOCK:
-            _QUIET["depth"] -= 1
-            if _QUIET["depth"] == 0:
-                sys.stdout, sys.stderr = _QUIET["saved"]
-
-
-# -- the run function of one input shape -----------------------------------------------------------
-@dataclasses.dataclass
-class _Step:
-    """One integrator call of a run: ``n`` output steps, which of them are grid points."""
-
-    F: ca.Function
-    n_c: int  # entries of the constant vector c used by this call
-    on: np.ndarray  # bool (n,): output step lands on the grid
-    j: np.ndarray  # grid indices of the steps on the grid
-
-
-@dataclasses.dataclass
-class _Shape:
-    """An input specification evaluated on the grid: the integrator calls and the per-run constants."""
-
-    key: str
-    steps: list
-    c: np.ndarray  # constants of every call, concatenated
-    U: np.ndarray  # (nt, nu) inputs as stored in results (right-continuous at breakpoints)
-    U_check: np.ndarray  # (nt, nu) inputs with which the simulator checks the validity domain
-    t_off: np.ndarray  # output times of the integrator that are not grid points (segment ends)
-    U_off: np.ndarray
-
-
-def _shape(sim: Simulator, t: np.ndarray, u) -> _Shape:
-    """Plan the integrator calls of :meth:`Simulator.run` for the input ``u`` on the grid ``t``."""
-    sigs = sim._signals(u, t)
-    segs, slots = sim._plan(sigs, t)
-    from phs.signals import Sampled
-
-    sampled = [(np.asarray(sg.times), np.asarray(sg.values)) if isinstance(sg, Sampled) else None for sg in sigs]
-    nt, nu = len(t), len(sigs)
-    U = np.zeros((nt, nu))
-    U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does
-    if segs:
-        U[0] = sim._eval_inputs(sigs, slots, segs[0][2], t[:1])[0]
-    steps, cs, t_off, u_off, key = [], [], [], [], []
-    for a, b, choice in segs:
-        tol_a, tol_b = 1e-12 * max(1.0, abs(a)), 1e-12 * max(1.0, abs(b))
-        ja = int(np.searchsorted(t, a - tol_a))
-        if ja < nt and abs(t[ja] - a) <= 1e-9 * max(1.0, abs(a)):
-            U[ja] = sim._eval_inputs(sigs, slots, choice, np.array([a]))[0]
-        i0 = int(np.searchsorted(t, a, side="left"))
-        i1 = int(np.searchsorted(t, b, side="left"))
-        idx_in = [i for i in range(i0, min(i1 + 1, nt)) if a < t[i] <= b + tol_b]
-        pts = [a] + [float(t[i]) for i in idx_in]
-        if pts[-1] < b - tol_b:
-            pts.append(b)
-        for ra, rh, rn, ms in _bounded(_runs(pts), sigs):
-            F, layout = sim._integrator(rn, slots, sampled, ms)
-            c = sim._pvec(np.zeros(0), ra, rh, layout, choice)
-            times = ra + rh * np.arange(1, rn + 1)
-            uu = sim._eval_inputs(sigs, slots, choice, times)
-            j = np.minimum(np.searchsorted(t, times - 1e-12 * np.maximum(1.0, np.abs(times))), nt - 1)
-            on = np.abs(t[j] - times) <= 1e-9 * np.maximum(np.maximum(1.0, np.abs(times)), rh)
-            U_check[j[on]] = uu[on]
-            keep = on & (np.abs(times - b) > tol_b)
-            U[j[keep]] = uu[keep]
-            if abs(times[-1] - b) <= tol_b and b >= t[-1] - tol_b:
-                U[j[-1]] = uu[-1]
-            t_off.extend(times[~on])
-            u_off.extend(uu[~on])
-            steps.append(_Step(F, len(c), on, j[on]))
-            cs.append(c)
-            key.append((id(F), len(c), on.tobytes(), j[on].tobytes()))
-    filled = np.concatenate([s.j for s in steps]) if steps else np.zeros(0, dtype=int)
-    if not np.array_equal(filled, np.arange(1, nt)):
-        raise SimulationError("batch evaluation: the integrator's output steps do not cover the time grid once each")
-    return _Shape(key=hashlib.sha1(repr(key).encode()).hexdigest(), steps=steps,
-                  c=np.concatenate(cs) if cs else np.zeros(0), U=U, U_check=U_check,
-                  t_off=np.asarray(t_off, dtype=float), U_off=np.asarray(u_off, dtype=float).reshape(-1, nu))
-
-
-def _run_function(sim: Simulator, shape: _Shape, name: str) -> ca.Function:
-    """Chain the integrator calls of ``shape`` into one function ``(z0, p, c) -> (Z, [Q], [Z_off])``."""
-    nx, npar = len(sim.system.states), len(sim.system.params)
-    nq = 2 + len(sim.system.dissipators) if sim.energy else 0
-    z0 = ca.MX.sym("z0", nx)
-    p = ca.MX.sym("p", npar)
-    c = ca.MX.sym("c", len(shape.c))
-    z = z0
-    grid, qgrid, off = [z0], [ca.MX.zeros(nq, 1)], []
-    qacc = ca.MX.zeros(nq, 1)
-    k = 0
-    for st in shape.steps:
-        out = st.F(x0=z, p=ca.vertcat(p, c[k:k + st.n_c]))
-        k += st.n_c
-        xf = out["xf"]
-        on = [int(i) for i in np.nonzero(st.on)[0]]
-        offi = [int(i) for i in np.nonzero(~st.on)[0]]
-        grid.append(xf if len(on) == len(st.on) else xf[:, on])
-        if offi:
-            off.append(xf[:, offi])
-        if nq:
-            qf = out["qf"]
-            qgrid.append(ca.repmat(qacc, 1, len(on)) + (qf if len(on) == len(st.on) else qf[:, on]))
-            qacc = qacc + qf[:, -1]
-        z = xf[:, -1]
-    outs, names = [ca.horzcat(*grid)], ["Z"]
-    if nq:
-        outs.append(ca.horzcat(*qgrid))
-        names.append("Q")
-    if off:
-        outs.append(ca.horzcat(*off))
-        names.append("Z_off")
-    return ca.Function(name, [z0, p, c], outs, ["z0", "p", "c"], names)
-
-
-# -- results -------------------------------------------------------------------------------------------
-class _BatchRun(SimulationResult):
-    """A run of a batch: a :class:`SimulationResult` whose derived signals were evaluated for the batch."""
-
-    def __init__(self, system, t, x, u, p, stats, pre: dict):
-        super().__init__(system, t, x, u, p, stats)
-        self._pre = pre
-
-    @property
-    def measured(self) -> np.ndarray:
-        """Measured outputs (nt, n_measured)."""
-        m = self._pre.get("measured")
-        return m if m is not None else super().measured
-
-    @property
-    def y(self) -> np.ndarray:
-        """Power-conjugate outputs (nt, nu)."""
-        y = self._pre.get("output")
-        return y if y is not None else super().y
-
-    @property
-    def H(self) -> np.ndarray:
-        """Hamiltonian along the trajectory."""
-        h = self._pre.get("hamiltonian")
-        return h if h is not None else super().H
-
-    @property
-    def _power(self):
-        pw = self._pre.get("power")
-        return pw if pw is not None else super()._power
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        col = self._pre.get("columns", {}).get(name)
-        return col if col is not None else super().__getitem__(name)
-
-
-class BatchResult:
-    """Trajectories of the runs of a batch, in arrays shared with CasADi's outputs.
-
-    Attributes
-    ----------
-    t : array (nt,)
-    x : array (n, nt, nx)
-        States of every run (rows of failed runs are NaN).
-    u : array (n, nt, nu)
-        Inputs on the grid.
-    p : array (n, n_params)
-        Parameter values.
-    quadratures : array (n, nt, 2 + n_dissipators) or None
-        Cumulative supplied energy, dissipated energy and energy dissipated per element
-        (with ``energy=True``).
-    errors : list
-        ``None`` for a run that succeeded, else its :class:`~phs.errors.PHSError`.
-    signals : dict
-        Derived signals evaluated for the whole batch (``"measured"``: (n, nt, n_measured), ...).
-    seconds : float
-        Wall time of the batch.
-
-    ``result[k]`` is run ``k`` as a :class:`~codegen.results.SimulationResult` (raising its error
-    if it failed); ``len(result)`` is the number of runs.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from systems.examples import rc_circuit
-    >>> batch = BatchSimulator(rc_circuit(), np.linspace(0, 1e-3, 11), threads=2)
-    >>> res = batch.run([{"R.R": 1e3}, {"R.R": 2e3}], u={"U": 1.0})
-    >>> len(res), bool(res.ok.all()), res.x.shape
-    (2, True, (2, 11, 1))
-    >>> round(float(res[0]["v_C"][-1]), 6)   # 1 - exp(-1)
-    0.632121
-    """
-
-    def __init__(self, system, t, x, u, p, quadratures, errors, signals, stats):
-        self.system = system
-        self.t = t
-        self.x = x
-        self.u = u
-        self.p = p
-        self.quadratures = quadratures
-        self.errors = errors
-        self.signals = signals
-        self.stats = stats
-        self.seconds = float(stats.get("seconds", 0.0))
-
-    def __len__(self) -> int:
-        return len(self.errors)
-
-    @property
-    def ok(self) -> np.ndarray:
-        """Boolean array: which runs succeeded."""
-        return np.array([e is None for e in self.errors], dtype=bool)
-
-    def __getitem__(self, k: int) -> SimulationResult:
-        k = range(len(self))[k]
-        if self.errors[k] is not None:
-            raise self.errors[k]
-        s = self.system
-        pre = {}
-        for name, arr in self.signals.items():
-            if name == "power":
-                pre[name] = tuple(a[k] for a in arr)
-            elif name == "hamiltonian":
-                pre[name] = arr[k][:, 0]
-            elif name in SIGNALS:
-                pre[name] = arr[k]
-            else:  # one measured output
-                pre.setdefault("columns", {})[name] = arr[k]
-        stats = {"runs": self.stats.get("integrator_calls"), "seconds": self.seconds / max(len(self), 1),
-                 "method": "cvodes", "rtol": self.stats.get("rtol"), "atol": self.stats.get("atol"), "batch": True}
-        res = _BatchRun(s, self.t, self.x[k], self.u[k], self.p[k], stats, pre)
-        if self.quadratures is not None:
-            Q = self.quadratures[k]
-            res.quadratures = {"E_supplied": Q[:, 0], "E_dissipated": Q[:, 1]}
-            for i, (label, _) in enumerate(s.dissipators):
-                res.quadratures[f"E_dissipated[{label}]"] = Q[:, 2 + i]
-        return res
-
-    def __repr__(self) -> str:
-        return f"BatchResult({self.system.name!r}, {len(self)} runs, {int(self.ok.sum())} ok, {len(self.t)} samples)"
-
-
-# -- the batch simulator ---------------------------------------------------------------------------------
-class _Mapped:
-    """A mapped function and its call buffers (one per thread: a buffer holds the evaluation's work memory,
-    whose allocation costs as much as a short evaluation)."""
-
-    def __init__(self, f: ca.Function):
-        self.f = f
-        self._local = threading.local()
-
-    def buffer(self):
-        hit = getattr(self._local, "buffer", None)
-        if hit is None:
-            hit = self._local.buffer = self.f.buffer()
-        return hit
 
 
 class BatchSimulator:
@@ -440,15 +92,7 @@ class BatchSimulator:
 
     def __init__(self, system, t, rtol: float = 1e-8, atol: float | None = None, max_steps: int = 20000,
                  compile: bool = False, energy: bool = True, threads: int | None = None):
-        t = np.array(t, dtype=float)
-        if t.ndim != 1 or len(t) < 2:
-            raise InputDataError("time grid must be a 1-D array with at least 2 points")
-        if not np.all(np.isfinite(t)):
-            raise InputDataError(f"time grid has a non-finite value at index {int(np.argmin(np.isfinite(t)))}")
-        d = np.diff(t)
-        if np.any(d <= 0):
-            i = int(np.argmax(d <= 0)) + 1
-            raise InputDataError(f"time grid is not strictly increasing at index {i} (t={t[i]})")
+        t = time_grid(np.array(t, dtype=float))
         if threads is not None and (not isinstance(threads, (int, np.integer)) or threads < 1):
             raise InputDataError(f"threads must be a positive integer, got {threads!r}")
         t.setflags(write=False)
@@ -473,13 +117,13 @@ class BatchSimulator:
         self.__init__(state["system"], state["t"], threads=state["threads"], **state["opts"])
 
     # -- preparation ------------------------------------------------------------------------------------
-    def _runfun(self, shape: _Shape) -> ca.Function:
+    def _runfun(self, shape: Shape) -> ca.Function:
         f = self._runfuns.get(shape.key)
         if f is None:
-            f = self._runfuns[shape.key] = _run_function(self.simulator, shape, f"{self.functions.rhs.name()}_run")
+            f = self._runfuns[shape.key] = run_function(self.simulator, shape, f"{self.functions.rhs.name()}_run")
         return f
 
-    def _map(self, f: ca.Function, n: int, inner: int | None = None) -> _Mapped:
+    def _map(self, f: ca.Function, n: int, inner: int | None = None) -> Mapped:
         """``f`` mapped over ``n`` runs (threads), optionally over ``inner`` grid points per run first."""
         key = (id(f), n, inner, self.threads)
         hit = self._mapped.get(key)
@@ -489,7 +133,7 @@ class BatchSimulator:
                 g = self._inner.get((id(f), inner))
                 if g is None:
                     g = self._inner[(id(f), inner)] = f.map(f"{f.name()}_grid", "serial", inner, [2], [])
-            hit = _Mapped(g.map(n, "thread", min(self.threads, n)) if self.threads > 1 and n > 1 else g.map(n, "serial"))
+            hit = Mapped(g.map(n, "thread", min(self.threads, n)) if self.threads > 1 and n > 1 else g.map(n, "serial"))
             self._mapped[key] = hit
             if len(self._mapped) > 64:
                 self._mapped.pop(next(iter(self._mapped)))
@@ -542,7 +186,7 @@ class BatchSimulator:
         s = self.system
         sim = self.simulator
         nt, nx, nu, npar = len(self.t), len(s.states), len(s.inputs), len(s.params)
-        nq = 2 + len(s.dissipators) if sim.energy else 0
+        nq = len(energy_columns(s)) if sim.energy else 0
 
         def each(v, k):
             return v[k] if isinstance(v, (list, tuple)) else v
@@ -560,7 +204,7 @@ class BatchSimulator:
                 if nx == 0:  # a static network: nothing to plan
                     continue
                 if id(uk) not in seen:
-                    seen[id(uk)] = _shape(sim, self.t, uk)
+                    seen[id(uk)] = plan_shape(sim, self.t, uk)
                 shapes[k] = seen[id(uk)]
             except PHSError as exc:
                 errors[k] = exc
@@ -627,7 +271,8 @@ class BatchSimulator:
     def _static(self, params, u, x0, N, errors, P, wall) -> BatchResult:
         """Runs of a system without states, one :meth:`Simulator.run` each."""
         s, nt, nu = self.system, len(self.t), len(self.system.inputs)
-        nq = 2 + len(s.dissipators) if self.simulator.energy else 0
+        columns = energy_columns(s)
+        nq = len(columns) if self.simulator.energy else 0
         U = np.zeros((N, nt, nu))
         Q = np.zeros((N, nt, nq)) if nq else None
         for k in range(N):
@@ -640,10 +285,8 @@ class BatchSimulator:
                 errors[k] = exc
                 continue
             U[k] = res.u
-            if nq:
-                Q[k, :, 0], Q[k, :, 1] = res.quadratures["E_supplied"], res.quadratures["E_dissipated"]
-                for i, (label, _) in enumerate(s.dissipators):
-                    Q[k, :, 2 + i] = res.quadratures[f"E_dissipated[{label}]"]
+            for i, name in enumerate(columns[:nq]):
+                Q[k, :, i] = res.quadratures[name]
         stats = {"seconds": _time.perf_counter() - wall, "rtol": self.simulator.rtol, "atol": self.simulator.atol,
                  "threads": self.threads, "integrator_calls": 0, "shapes": 0}
         return BatchResult(s, self.t, np.zeros((N, nt, 0)), U, P, Q, errors, {}, stats)
@@ -663,7 +306,7 @@ class BatchSimulator:
         if Zoff is not None:
             r += 1
             buf.set_res(r, memoryview(Zoff))
-        with _quiet():
+        with quiet():
             try:
                 trigger()
                 failed = buf.ret() != 0
@@ -681,7 +324,7 @@ class BatchSimulator:
     def _failure(self, k, u, x0, p) -> PHSError:
         """The error :meth:`Simulator.run` reports for a run whose integration failed."""
         params = dict(zip(self.system.param_names, p.tolist()))
-        with _quiet():
+        with quiet():
             try:
                 self.simulator.run(self.t, u=u, x0=x0, params=params)
             except PHSError as exc:
@@ -707,12 +350,12 @@ class BatchSimulator:
             for i, a in enumerate((X, U_check, P)):
                 buf.set_arg(i, memoryview(np.ascontiguousarray(a)))
             buf.set_res(0, memoryview(G))
-            with np.errstate(all="ignore"), _quiet():
+            with np.errstate(all="ignore"), quiet():
                 trigger()
             bad |= nonfinite_or_below(G, -1e-12)
         return bad
 
-    def _check(self, x, xoff, shape: _Shape, p) -> PHSError | None:
+    def _check(self, x, xoff, shape: Shape, p) -> PHSError | None:
         """The error of a run with a non-finite state or a violated condition (first in time first),
         also looking at the integrator's outputs between grid points (``xoff``)."""
         s = self.system
@@ -732,7 +375,7 @@ class BatchSimulator:
                 return exc
         if first_bad is not None:
             return SimulationError(f"simulation of {s.name!r}: non-finite state at t={t_all[first_bad]:.6g}: "
-                                   + _fmt_state(s, x_all[first_bad]))
+                                   + fmt_state(s, x_all[first_bad]))
         return None
 
     def _derived(self, signals, X, U, P) -> dict:
@@ -754,7 +397,7 @@ class BatchSimulator:
             res = [np.empty((N, nt, fun.size1_out(i))) for i in range(fun.n_out())]
             for i, r in enumerate(res):
                 buf.set_res(i, memoryview(r))
-            with np.errstate(all="ignore"), _quiet():
+            with np.errstate(all="ignore"), quiet():
                 trigger()
             if key == "power":
                 out[key] = tuple(r[:, :, 0] for r in res)

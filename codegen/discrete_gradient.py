@@ -36,9 +36,11 @@ from numbers import Real
 import casadi as ca
 import numpy as np
 
+from codegen._domain import DomainCheck, fmt_state
+from codegen._grid import time_grid
+from codegen._inputs import initial_state, input_signals, inputs_at
 from codegen.functions import generate
 from codegen.results import SimulationResult
-from codegen.simulator import Simulator
 from phs.errors import InputDataError, SimulationError
 from phs.params import c_identifier
 
@@ -196,19 +198,14 @@ def _run(s, t, u, x0, params, newton_tol, midpoint: bool) -> SimulationResult:
     wall = _time.perf_counter()
     if not isinstance(newton_tol, Real) or not 0 < newton_tol < 1:
         raise InputDataError(f"newton_tol must be a number in (0, 1), not {newton_tol!r}")
-    t = np.asarray(t, dtype=float)
-    if t.ndim != 1 or len(t) < 2 or not np.all(np.isfinite(t)):
-        raise InputDataError("time grid must be a 1-D array of finite values with at least 2 points")
-    if np.any(np.diff(t) <= 0):
-        i = int(np.argmax(np.diff(t) <= 0)) + 1
-        raise InputDataError(f"time grid is not strictly increasing at index {i} (t={t[i]})")
-    sim = Simulator(s)
+    t = time_grid(t)
+    f = generate(s)
     p = s.param_vector(params)
-    x = sim.initial_state(x0)
-    sigs = sim._signals(u, t)
+    x = initial_state(s, x0)
+    sigs = input_signals(s, u, t)
     h = np.diff(t)
     mid = t[:-1] + h / 2
-    u_mid, u_grid = sim._inputs_at(sigs, mid), sim._inputs_at(sigs, t)
+    u_mid, u_grid = inputs_at(sigs, mid), inputs_at(sigs, t)
 
     n, nx, run = len(h), len(x), _stepper(s, float(newton_tol), midpoint)
     pad = -n % _CHUNK  # padding steps of length 0 keep the state
@@ -225,14 +222,13 @@ def _run(s, t, u, x0, params, newton_tol, midpoint: bool) -> SimulationResult:
     res, Hs, err, flow = out[nx:]
     bad = ~(res <= newton_tol) | ~np.all(np.isfinite(X[1:]), axis=1)
     k = int(np.argmax(bad)) if np.any(bad) else len(res)
-    sim._check_domain(X[: k + 1], t[: k + 1], p, u_grid[: k + 1])
+    DomainCheck(s, f)(X[: k + 1], t[: k + 1], p, u_grid[: k + 1])
     if k < len(res):
         what = "the state became non-finite" if not np.all(np.isfinite(X[k + 1])) else (
             f"Newton's method did not converge (scaled residual {res[k]:.3g} > {newton_tol:.3g})")
-        state = ", ".join(f"{nm}={v:.6g}" for nm, v in zip(s.state_names, X[k], strict=True))
         raise SimulationError(f"discrete-gradient simulation of {s.name!r} failed in the step from t={t[k]:.6g} "
-                              f"to t={t[k + 1]:.6g}: {what}; state at t={t[k]:.6g}: {state}")
-    H0 = float(generate(s).hamiltonian(X[0], u_grid[0], p))
+                              f"to t={t[k + 1]:.6g}: {what}; state at t={t[k]:.6g}: {fmt_state(s, X[k])}")
+    H0 = float(f.hamiltonian(X[0], u_grid[0], p))
     energy_scale = max(abs(H0), float(np.max(np.abs(Hs))), float(np.max(flow)), 1e-300)
     stats = {"method": "implicit_midpoint" if midpoint else "discrete_gradient", "steps": n, "newton_tol": newton_tol,
              "discrete_energy_residual": float(np.max(np.abs(err))) / energy_scale,

@@ -20,7 +20,7 @@ from phs.workflows.recording import Recording
 from systems.electrostatic_actuator import electrostatic_actuator
 from systems.examples import mass_spring_damper
 
-simmod = importlib.import_module("codegen.simulator")  # the module (``codegen.simulator`` is also a function)
+simmod = importlib.import_module("codegen._grid")  # the module of step_windows and its step factors
 
 
 def test_windows_follow_the_input():

@@ -1,0 +1,209 @@
+"""Inputs and initial states of a simulation, as the user gives them.
+
+A user's input specification (numbers, :mod:`phs.signals` signals, expressions of ``t``, arrays on
+the grid, callables) becomes one piecewise-smooth :class:`~phs.signals.Signal` per system input
+(:func:`input_signals`).  The time between the inputs' breakpoints is cut into segments, and on each
+segment every input is a sympy template whose numbers are left as constants (:func:`plan_segments`),
+so that one integrator serves every segment of the same shape; :func:`segment_inputs` evaluates the
+inputs of a segment from its template and constants.
+"""
+
+from __future__ import annotations
+
+from numbers import Real
+
+import numpy as np
+import sympy as sp
+
+from phs.errors import InputDataError
+from phs.params import TIME
+from phs.signals import Piecewise, Sampled, Signal, as_signal
+
+
+def input_signals(system, u, t) -> list[Signal]:
+    """One signal per input of ``system`` from a user's specification ``u`` on the grid ``t``.
+
+    ``u`` is a dict by input name (a bare value when the system has one input); missing inputs are
+    zero.  Arrays are samples on ``t``; a callable of ``t`` is turned into an expression when sympy
+    can evaluate it, else sampled on ``t``; samples held by zero-order hold become a piecewise
+    constant signal (its jumps are breakpoints).
+
+    Raises
+    ------
+    InputDataError
+        Naming an unknown input, an array of the wrong shape or an input that is not a signal.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> sigs = input_signals(rc_circuit(), {"U": "2*t"}, np.linspace(0, 1, 3))
+    >>> float(sigs[0](0.5))
+    1.0
+    """
+    s = system
+    names = s.input_names
+    if u is None:
+        u = {}
+    if not isinstance(u, dict):
+        if len(names) != 1:
+            raise InputDataError(f"system {s.name!r} has inputs {names}; give u as a dict by name")
+        u = {names[0]: u}
+    unknown = [k for k in u if k not in names]
+    if unknown:
+        raise InputDataError(f"system {s.name!r} has no input {', '.join(map(repr, unknown))}; inputs: {names}")
+    out = []
+    for name in names:
+        spec = u.get(name, 0.0)
+        if isinstance(spec, (np.ndarray, list, tuple)):
+            arr = np.asarray(spec, dtype=float)
+            if arr.shape != t.shape:
+                raise InputDataError(f"input {name!r}: array of shape {arr.shape} does not match the time grid {t.shape}")
+            spec = Sampled(tuple(t), tuple(arr))
+        elif callable(spec) and not isinstance(spec, Signal):
+            try:
+                e = sp.sympify(spec(TIME))
+                spec = as_signal(e)
+            except Exception:  # a numpy-only callable: sample it on the grid
+                spec = Sampled(tuple(t), tuple(np.asarray(spec(t), dtype=float)))
+        if isinstance(spec, Sampled) and spec.hold == "zoh":  # held samples jump: restart at each change
+            vals = np.asarray(spec.values, dtype=float)
+            tt = np.asarray(spec.times, dtype=float)
+            spec = Piecewise(tuple(tt[1:]), tuple(vals[1:]), float(vals[0])) if len(tt) > 1 else float(vals[0])
+        try:
+            out.append(as_signal(spec))
+        except InputDataError as exc:
+            raise InputDataError(f"input {name!r}: {exc}") from None
+    return out
+
+
+def initial_state(system, x0) -> np.ndarray:
+    """Initial state vector of ``system`` from a dict by name or an array (default zero clipped into the ranges).
+
+    Raises
+    ------
+    InputDataError
+        Naming an unknown state, a non-finite value or a wrong number of values.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> initial_state(mass_spring_damper(), {"k.l": 0.5})
+    array([0. , 0.5])
+    """
+    s = system
+    base = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in s.states])
+    if x0 is None:
+        return base
+    if isinstance(x0, dict):
+        unknown = [k for k in x0 if k not in s.state_names]
+        if unknown:
+            raise InputDataError(f"x0: system {s.name!r} has no state {', '.join(map(repr, unknown))}")
+        for k, v in x0.items():
+            if not isinstance(v, Real) or not np.isfinite(v):
+                raise InputDataError(f"x0: value {v!r} of state {k!r} is not a finite number")
+            base[s.state_names.index(k)] = float(v)
+        return base
+    arr = np.asarray(x0, dtype=float).reshape(-1)
+    if arr.shape != base.shape:
+        raise InputDataError(f"x0 has {arr.size} values but {s.name!r} has {base.size} states")
+    if not np.all(np.isfinite(arr)):
+        raise InputDataError(f"x0 has a non-finite value for state {s.state_names[int(np.argmin(np.isfinite(arr)))]!r}")
+    return arr.copy()
+
+
+def inputs_at(sigs, times) -> np.ndarray:
+    """The signals ``sigs`` at ``times``: an array (len(times), len(sigs)).
+
+    Examples
+    --------
+    >>> inputs_at([as_signal(1.0), as_signal("t")], np.array([0.0, 2.0]))
+    array([[1., 0.],
+           [1., 2.]])
+    """
+    if not sigs:
+        return np.zeros((len(times), 0))
+    return np.column_stack([np.broadcast_to(np.asarray(sg(times), dtype=float), times.shape) for sg in sigs])
+
+
+def input_template(expr: sp.Expr):
+    """Replace the numbers of an input expression by placeholders ``_c0, _c1, ...``: (key, template, values).
+
+    Examples
+    --------
+    >>> key, tmpl, vals = input_template(sp.sympify("2.5*sin(3.0*t)"))
+    >>> tmpl, vals
+    (_c0*sin(_c1*t), [2.5, 3.0])
+    """
+    floats = sorted(expr.atoms(sp.Float), key=lambda f: sp.default_sort_key(f))
+    if expr.is_Float:
+        floats = [expr]
+    ph = [sp.Symbol(f"_c{k}", real=True) for k in range(len(floats))]
+    tmpl = expr.xreplace(dict(zip(floats, ph))) if not expr.is_Float else ph[0]
+    key = sp.srepr(tmpl)
+    return key, tmpl, [float(f) for f in floats]
+
+
+def plan_segments(sigs, t):
+    """Segments between the inputs' breakpoints on ``[t[0], t[-1]]`` and the input templates they use.
+
+    Returns ``(segs, slots)``: ``segs`` a list of ``(a, b, choice)`` with ``choice[j]`` the index of
+    input ``j``'s template in ``slots[j]`` and its constants (None for a sampled input), ``slots[j]``
+    the templates of input ``j`` as ``(key, template, n_constants)``.
+
+    Examples
+    --------
+    >>> from phs.signals import step
+    >>> segs, slots = plan_segments([step(1.0, at=0.5)], np.linspace(0.0, 1.0, 5))
+    >>> [(a, b, c) for a, b, c in segs]
+    [(0.0, 0.5, [(0, [0.0])]), (0.5, 1.0, [(0, [1.0])])]
+    """
+    t0, t1 = float(t[0]), float(t[-1])
+    bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)})
+    edges = [t0] + [b for b in bps if t0 < b < t1] + [t1]
+    slots: list[list] = [[] for _ in sigs]  # per input: list of (key, template, n_constants)
+    segs = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b <= a:
+            continue
+        choice = []
+        for j, s in enumerate(sigs):
+            if isinstance(s, Sampled):
+                choice.append(None)
+                continue
+            key, tmpl, vals = input_template(sp.sympify(s.expr_on(a, b)))
+            keys = [k for k, _, _ in slots[j]]
+            if key not in keys:
+                slots[j].append((key, tmpl, len(vals)))
+                keys.append(key)
+            choice.append((keys.index(key), vals))
+        segs.append((a, b, choice))
+    return segs, slots
+
+
+def segment_inputs(sigs, slots, choice, times, cache: dict) -> np.ndarray:
+    """Inputs at ``times`` inside one segment, from the segment's templates and constants.
+
+    ``cache`` keeps the templates' numpy functions by key across calls.
+
+    Examples
+    --------
+    >>> from phs.signals import step
+    >>> sigs = [step(1.0, at=0.5)]
+    >>> segs, slots = plan_segments(sigs, np.linspace(0.0, 1.0, 5))
+    >>> segment_inputs(sigs, slots, segs[1][2], np.array([0.75, 1.0]), {})
+    array([[1.],
+           [1.]])
+    """
+    out = np.empty((len(times), len(sigs)))
+    for j, sg in enumerate(sigs):
+        if isinstance(sg, Sampled):
+            out[:, j] = sg(times)
+            continue
+        k, vals = choice[j]
+        key, tmpl, nc = slots[j][k]
+        f = cache.get(key)
+        if f is None:
+            f = sp.lambdify([TIME] + [sp.Symbol(f"_c{i}", real=True) for i in range(nc)], tmpl, "numpy")
+            cache[key] = f
+        out[:, j] = np.broadcast_to(np.asarray(f(times, *vals), dtype=float), times.shape)
+    return out

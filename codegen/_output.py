@@ -1,0 +1,142 @@
+"""Integrator outputs collected on the user's time grid.
+
+Between two input breakpoints the integrator is called over runs of equally spaced output points
+(:mod:`codegen._grid`); a segment end that is not a grid point is an output step of its own.
+:func:`output_runs` walks these calls for a whole simulation and says, for every output step, which
+grid point it lands on (if any), while it fills the inputs as a result stores them: right-continuous,
+so a grid point on a breakpoint sees the new segment's input, except the final time, which has no next
+segment.  The simulator and the batch both collect their outputs through it, so a run of a batch
+lands on the grid exactly where :meth:`codegen.simulator.Simulator.run` puts it.
+
+Outputs go straight into preallocated numpy arrays: :func:`call_into_numpy` hands them to CasADi's
+call buffer, whose column-major ``(nx, n)`` result is the memory of a C-ordered ``(n, nx)`` array.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from codegen._grid import bounded_runs, equal_runs
+from phs.errors import SimulationError
+
+
+@dataclasses.dataclass
+class OutputRun:
+    """One integrator call: ``n`` output steps of length ``step`` from ``start`` inside segment ``(a, b)``."""
+
+    choice: list  # the segment's input templates and constants (see codegen._inputs.plan_segments)
+    start: float
+    step: float
+    n: int
+    max_step: float  # bound on the integration step, in output intervals (codegen._grid.bounded_runs)
+    times: np.ndarray  # (n,) output times of the call
+    j: np.ndarray  # (n,) index of the grid point each output time lands on (or the next one)
+    on: np.ndarray  # bool (n,): the output time is a grid point
+    u: np.ndarray  # (n, nu) inputs at the output times
+
+    def store(self, out: np.ndarray, values: np.ndarray) -> None:
+        """Write the rows of ``values`` (one per output step) that fall on grid points into ``out``."""
+        out[self.j[self.on]] = values[self.on]
+
+
+def output_runs(t, sigs, segs, inputs, U):
+    """The integrator calls covering the grid ``t`` segment by segment, as :class:`OutputRun` objects.
+
+    ``segs`` are the segments of :func:`codegen._inputs.plan_segments`, ``inputs(choice, times)``
+    evaluates a segment's inputs, and ``U`` (len(t), nu), preallocated, receives the inputs on the grid
+    as results store them (the first row before the first call).
+
+    Examples
+    --------
+    >>> from codegen._inputs import plan_segments, segment_inputs
+    >>> from phs.signals import step
+    >>> t, sigs = np.linspace(0.0, 1.0, 3), [step(1.0, at=0.25)]
+    >>> segs, slots = plan_segments(sigs, t)
+    >>> U = np.zeros((3, 1))
+    >>> runs = list(output_runs(t, sigs, segs, lambda c, tt: segment_inputs(sigs, slots, c, tt, {}), U))
+    >>> [(r.start, r.n, r.on.tolist()) for r in runs]   # the edge at 0.25 is an output step off the grid
+    [(0.0, 1, [False]), (0.25, 1, [True]), (0.5, 1, [True])]
+    >>> U[:, 0]
+    array([0., 1., 1.])
+    """
+    nt = len(t)
+    for k, (a, b, choice) in enumerate(segs):
+        if k == 0:
+            U[0] = inputs(choice, t[:1])[0]
+        tol_a, tol_b = 1e-12 * max(1.0, abs(a)), 1e-12 * max(1.0, abs(b))
+        # inputs are right-continuous: a grid point on a breakpoint sees the new segment's input
+        ja = int(np.searchsorted(t, a - tol_a))
+        if ja < nt and abs(t[ja] - a) <= 1e-9 * max(1.0, abs(a)):
+            U[ja] = inputs(choice, np.array([a]))[0]
+        i0 = int(np.searchsorted(t, a, side="left"))
+        i1 = int(np.searchsorted(t, b, side="left"))
+        # output indices strictly inside (a, b], plus b itself if it is a grid point
+        idx_in = [i for i in range(i0, min(i1 + 1, nt)) if a < t[i] <= b + tol_b]
+        pts = [a] + [float(t[i]) for i in idx_in]
+        if pts[-1] < b - tol_b:
+            pts.append(b)
+        for ra, rh, rn, ms in bounded_runs(equal_runs(pts), sigs):
+            times = ra + rh * np.arange(1, rn + 1)
+            uu = inputs(choice, times)
+            j = np.minimum(np.searchsorted(t, times - 1e-12 * np.maximum(1.0, np.abs(times))), nt - 1)
+            on = np.abs(t[j] - times) <= 1e-9 * np.maximum(np.maximum(1.0, np.abs(times)), rh)
+            keep = on & (np.abs(times - b) > tol_b)  # b belongs to the next segment
+            U[j[keep]] = uu[keep]
+            if abs(times[-1] - b) <= tol_b and b >= t[-1] - tol_b:
+                U[j[-1]] = uu[-1]  # the final time has no next segment
+            yield OutputRun(choice, ra, rh, rn, ms, times, j, on, uu)
+
+
+def check_covered(runs, nt: int, what: str) -> None:
+    """Raise a :class:`SimulationError` unless the output steps of ``runs`` land on grid points 1..nt-1 once each, in order.
+
+    Examples
+    --------
+    >>> run = OutputRun([], 0.0, 0.5, 2, 1.0, np.array([0.5, 1.0]), np.array([1, 2]), np.array([True, True]), None)
+    >>> check_covered([run], 3, "example")
+    >>> check_covered([run], 4, "example")
+    Traceback (most recent call last):
+    ...
+    phs.errors.SimulationError: example: the integrator's output steps do not cover the time grid once each
+    """
+    filled = np.concatenate([r.j[r.on] for r in runs]) if runs else np.zeros(0, dtype=int)
+    if not np.array_equal(filled, np.arange(1, nt)):
+        raise SimulationError(f"{what}: the integrator's output steps do not cover the time grid once each")
+
+
+def energy_columns(system) -> list[str]:
+    """Names of the energy accounts integrated with the states, in the order of their columns.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> energy_columns(rc_circuit())
+    ['E_supplied', 'E_dissipated', 'E_dissipated[R]']
+    """
+    return ["E_supplied", "E_dissipated"] + [f"E_dissipated[{label}]" for label, _ in system.dissipators]
+
+
+def energy_accounts(system, Q) -> dict:
+    """The energy accounts of ``system`` by name, as views of the columns of ``Q`` (nt, n_accounts)."""
+    return {name: Q[:, k] for k, name in enumerate(energy_columns(system))}
+
+
+def call_into_numpy(F, z0, P, nx: int, n: int, nq: int):
+    """Call an integrator writing its outputs straight into numpy arrays (no DM -> numpy copy).
+
+    CasADi stores the (nx, n) output column-major, which is the memory layout of a
+    C-ordered (n, nx) array: the rows are the states at each output time.
+    """
+    buf, trigger = F.buffer()
+    z0 = np.ascontiguousarray(z0, dtype=float)
+    P = np.ascontiguousarray(P, dtype=float)
+    zs = np.empty((n, nx))
+    qs = np.empty((n, nq))
+    buf.set_arg(0, memoryview(z0))
+    buf.set_arg(2, memoryview(P))
+    buf.set_res(0, memoryview(zs))
+    buf.set_res(2, memoryview(qs))
+    trigger()
+    return zs, qs
