@@ -78,6 +78,22 @@ class ParameterError(ModelError, KeyError):
         return Exception.__str__(self)
 
 
+class ParameterRangeWarning(UserWarning):
+    """A parameter value outside the parameter's declared range (accepted: ranges bound sampling and fits,
+    not physics; a value of the wrong sign is refused with :class:`ParameterError` instead).
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from systems.examples import rc_circuit
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     _ = rc_circuit().with_params({"R.R": 1e9})
+    >>> caught[0].category is ParameterRangeWarning and "R.R" in str(caught[0].message)
+    True
+    """
+
+
 class UnitError(ModelError):
     """Declared units are inconsistent (an energy term that is not in joules).
 

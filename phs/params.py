@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from dataclasses import dataclass
 
 import sympy as sp
 
-from phs.errors import ModelError
+from phs.errors import ModelError, ParameterError, ParameterRangeWarning
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
@@ -101,6 +102,40 @@ class Param:
         if not lo <= hi:
             raise ModelError(f"parameter {self.name!r}: range [{lo}, {hi}] has lower > upper")
         object.__setattr__(self, "range", (lo, hi))
+        if self.positive and self.value is not None and not self.value > 0:
+            raise ModelError(f"parameter {self.name!r} is declared positive but its value is {self.value:g}")
+
+    def checked(self, value, where: str = "") -> float:
+        """``value`` as a float, refused unless finite and of the declared sign; warned outside the range.
+
+        Every value that enters from outside (``with_params``, ``params=`` overrides, ``--param``)
+        passes here: a parameter declared positive (a resistance, a capacitance, a mass) refuses
+        zero and negative values with a :class:`ParameterError` naming it; a value outside the
+        declared range is accepted with a :class:`ParameterRangeWarning` (ranges bound sampling and
+        fits, not physics).  ``where`` is appended to the message (e.g. ``" (--param)"``).
+
+        Examples
+        --------
+        >>> Param("C", 1e-6, "F").checked(2e-6)
+        2e-06
+        >>> Param("C", 1e-6, "F").checked(-1e-6)
+        Traceback (most recent call last):
+        ...
+        phs.errors.ParameterError: parameter 'C' [F] is declared positive; value -1e-06 refused
+        """
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ParameterError(f"parameter {self.name!r}: value {value!r} is not a number{where}") from None
+        if not math.isfinite(v):
+            raise ParameterError(f"parameter {self.name!r}: value {v} is not finite{where}")
+        if self.positive and not v > 0:
+            raise ParameterError(f"parameter {self.name!r} [{self.unit}] is declared positive; value {v:g} refused{where}")
+        lo, hi = self.range
+        if not lo <= v <= hi:
+            warnings.warn(f"parameter {self.name!r} = {v:g} is outside its declared range [{lo:g}, {hi:g}]{where}",
+                          ParameterRangeWarning, stacklevel=3)
+        return v
 
     @property
     def symbol(self) -> sp.Symbol:
@@ -115,7 +150,7 @@ class Param:
         >>> Param("R", 1e3, "Ohm").with_value(2e3).value
         2000.0
         """
-        return Param(self.name, value, self.unit, self.description, self.range, self.positive)
+        return Param(self.name, self.checked(value), self.unit, self.description, self.range, self.positive)
 
     def renamed(self, name: str) -> Param:
         """Copy under another name (used to untie a shared parameter)."""

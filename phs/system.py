@@ -237,15 +237,32 @@ class PHSystem:
                 return q
         raise ParameterError(f"system {self.name!r} has no parameter {name!r}; known: {', '.join(self.param_names)}")
 
-    def param_vector(self, overrides: dict | None = None) -> np.ndarray:
-        """Parameter values in order, with ``overrides`` by name applied (checked)."""
+    def param_vector(self, overrides: dict | None = None, *, signs: bool = True) -> np.ndarray:
+        """Parameter values in order, with ``overrides`` by name applied and checked.
+
+        An override must name a parameter and be a finite number of the declared sign
+        (:meth:`Param.checked`: a value outside the declared range warns).  ``signs=False``
+        lets a value of the wrong sign through: only for analyses that report what it does
+        (the passivity certificate's what-if), never for a simulation.
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> rc_circuit().param_vector({"R.R": 2e3}).tolist()
+        [2000.0, 1e-06]
+        >>> rc_circuit().param_vector({"C.C": -1e-6})
+        Traceback (most recent call last):
+        ...
+        phs.errors.ParameterError: parameter 'C.C' [F] is declared positive; value -1e-06 refused
+        """
         vals = self.param_values()
+        by_name = {q.name: q for q in self.params}
         for k, v in (overrides or {}).items():
             if k not in vals:
                 raise ParameterError(f"system {self.name!r} has no parameter {k!r}; known: {', '.join(self.param_names)}")
             if not isinstance(v, Real) or not np.isfinite(v):
                 raise ParameterError(f"parameter {k!r}: value {v!r} is not a finite number")
-            vals[k] = float(v)
+            vals[k] = by_name[k].checked(v) if signs else float(v)
         return np.array([vals[q] for q in self.param_names], dtype=float)
 
     def with_params(self, values: dict | None = None, **kw) -> PHSystem:

@@ -55,7 +55,7 @@ def _bounds(name: str, value) -> tuple[float, float]:
 def _resolve_box(system, box, params) -> _Box:
     """States over their declared ranges (or ``box``), parameters named in ``box`` over theirs, others fixed."""
     box = dict(box or {})
-    p = system.param_vector(params)
+    p = system.param_vector(params, signs=False)  # a what-if value of the wrong sign is reported, not refused
     known = set(system.state_names) | set(system.param_names)
     for name in box:
         if name not in known:

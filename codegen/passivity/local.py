@@ -197,7 +197,7 @@ def local_passivity(system, x_eq=None, u_eq=None, *, params=None, x0=None, frequ
     import control
 
     model = _model(system)
-    p = system.param_vector(params)
+    p = system.param_vector(params, signs=False)  # a what-if value of the wrong sign is reported, not refused
     x, uv, how = _equilibrium_point(system, model, x_eq, u_eq, p, params, x0)
     x_named = dict(zip(system.state_names, map(float, x)))
     u_named = dict(zip(system.input_names, map(float, uv)))

@@ -185,8 +185,8 @@ def run_passivity(args: argparse.Namespace) -> int:
         _check_writable(os.path.join(args.report, "report.html") if os.path.isdir(args.report) else args.report)
     params = parse_assignments(args.param, "--param", numeric=True)
     x0 = parse_assignments(args.x0, "--x0", numeric=True)
-    system = load_model(args.model)  # --param values are the certificate's overrides: a negative resistance is
-    system.param_vector(params)      # reported as a failure, not refused (unknown names raise ParameterError)
+    system = load_model(args.model)  # --param values are the certificate's what-if overrides: a value of the wrong
+    system.param_vector(params, signs=False)  # sign is reported as a failure, not refused (unknown names raise)
     unknown = [k for k in x0 if k not in system.state_names]
     if unknown:
         raise InputDataError(f"--x0: system {system.name!r} has no state {unknown[0]!r} "

@@ -89,8 +89,8 @@ def test_second_order_convergence_on_linear_msd():
 
 
 def test_escaping_softening_spring_raises_naming_time_and_state():
-    s, t = duffing_oscillator(), np.linspace(0, 10, 101)
-    run = dict(x0={"s.q": 2.0}, params={"k3": -1.0})  # k3 < 0: the mass escapes over the potential barrier
+    s, t = duffing_oscillator(k3=-1.0), np.linspace(0, 10, 101)
+    run = dict(x0={"s.q": 2.0})  # k3 < 0 (declared so, not overridden): the mass escapes over the potential barrier
     with pytest.raises(SimulationError) as err:
         discrete_gradient_simulate(s, t, **run)
     msg = str(err.value)
