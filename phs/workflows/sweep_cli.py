@@ -33,6 +33,7 @@ import numpy as np
 
 from phs.errors import InputDataError, ParameterError
 from phs.io import write_atomic
+from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _positive
 from phs.workflows.inputs import input_signals, parse_assignments
 from phs.workflows.loader import load_model
 
@@ -48,8 +49,6 @@ def add_subcommand(sub) -> None:
     >>> sorted(sub.choices)
     ['sweep']
     """
-    from phs.workflows.cli import _add_model_options, _positive
-
     p = sub.add_parser(
         "sweep", help="evaluate a model over a grid or samples of parameters (metrics per run)",
         description="Simulate MODEL for every combination of the --range grid axes (and --samples drawn "
@@ -188,7 +187,6 @@ def run_sweep(args) -> int:
     The study is checked completely (model, ranges, metrics, inputs, files) before the first run;
     rows are then written to ``--out`` as runs finish, and the figure and JSON summary at the end.
     """
-    from phs.workflows.cli import _check_writable, _finite_or_none
     from phs.workflows.sweep import Study, from_fit, sweep
     from phs.workflows.sweep_metrics import metric
 

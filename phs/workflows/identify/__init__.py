@@ -29,6 +29,7 @@ Modules: :mod:`~phs.workflows.identify.solve` (the driver, :func:`identify`),
 
 from phs.workflows.identify.result import IdentificationResult
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
+from phs.workflows.identify.sensitivity_table import sensitivity_markdown
 from phs.workflows.identify.solve import identify
 
-__all__ = ["identify", "IdentificationResult", "nrmse_fit", "evaluate_fit"]
+__all__ = ["identify", "IdentificationResult", "nrmse_fit", "evaluate_fit", "sensitivity_markdown"]
