@@ -67,7 +67,7 @@ def _simulate_bench():
 def _study(n: int, duration: float, with_energy: bool, seed: int = 0):
     from phs.signals import square
     from phs.workflows.sweep import Study, Uniform
-    from phs.workflows.sweep_metrics import energy, final, peak, rise_time
+    from phs.workflows.sweep.metrics import energy, final, peak, rise_time
     from systems.curling_hasel import curling_hasel
 
     system = curling_hasel(4)
@@ -105,7 +105,7 @@ def _baseline(study, drive, runs, sim_bench, with_energy):
     from scipy.integrate import solve_ivp
 
     from codegen import Simulator
-    from phs.workflows.sweep_metrics import rise_time_of
+    from phs.workflows.sweep.metrics import rise_time_of
 
     s = study.system
     wall = time.perf_counter()

@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 from phs import equilibrium  # noqa: E402
 from phs.signals import step  # noqa: E402
 from phs.workflows.sweep import LogNormal, Study, StudyResult, sweep  # noqa: E402
-from phs.workflows.sweep_metrics import final, peak, rise_time, values_at  # noqa: E402
+from phs.workflows.sweep.metrics import final, peak, rise_time, values_at  # noqa: E402
 from systems.msd_hasel import msd_hasel  # noqa: E402
 
 QUICK = "--quick" in sys.argv

@@ -37,6 +37,7 @@ import numpy as np
 
 from phs.errors import InputDataError
 from phs.io import write_atomic
+from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _name_list, _positive
 from phs.workflows.inputs import parse_assignments
 from phs.workflows.loader import load_model
 
@@ -51,8 +52,6 @@ def add_subcommand(sub) -> None:
     >>> args.target, args.integral
     (['tip=0.03'], None)
     """
-    from phs.workflows.cli import _add_model_options, _positive
-
     p = sub.add_parser(
         "control", help="design an IDA-PBC controller holding a model at a target, with certificates",
         description="Design an IDA-PBC controller for MODEL that holds the targets (states or measured outputs), "
@@ -121,8 +120,6 @@ def run_control(args: argparse.Namespace) -> int:
     Everything (design, certificates, simulation, figure, C sources, JSON) is computed before the first
     file is written.
     """
-    from phs.workflows.cli import _check_writable, _finite_or_none, _name_list
-
     _check_writable(args.json)
     _check_dir("--report", args.report)
     _check_dir("--export-c", args.export_c)

@@ -25,6 +25,7 @@ import os
 
 from phs.errors import InputDataError
 from phs.io import write_atomic
+from phs.workflows.cli_options import _add_model_options, _check_writable, _positive
 from phs.workflows.inputs import input_signals, parse_assignments, read_input_csv
 from phs.workflows.loader import load_model
 
@@ -39,8 +40,6 @@ def add_subcommand(sub) -> None:
     >>> args.box, args.samples
     (['C.Q=-1e-6:1e-6'], 2000)
     """
-    from phs.workflows.cli import _add_model_options, _positive
-
     p = sub.add_parser(
         "passivity", help="certify that a model is passive over a box of states and parameters",
         description="Certify MODEL passive: J skew, [[R, P], [P^T, S]] positive semidefinite over the box "
@@ -176,8 +175,6 @@ def run_passivity(args: argparse.Namespace) -> int:
     Every check runs and every output is rendered before the first file is written, so an error writes
     nothing.
     """
-    from phs.workflows.cli import _check_writable
-
     _check_writable(args.json)
     if args.report is not None:
         if os.path.exists(args.report) and not os.path.isdir(args.report):

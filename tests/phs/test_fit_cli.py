@@ -8,7 +8,9 @@ import os
 import numpy as np
 import pytest
 
-from phs.workflows.cli import main, parse_scales, sensitivity_markdown
+from phs.workflows.cli import main
+from phs.workflows.cli_recordings import parse_scales
+from phs.workflows.identify import sensitivity_markdown
 
 RC = "systems.examples:rc_circuit"
 R_TRUE = 1500.0

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-import phs.workflows.identify as ident
+import phs.workflows.identify.sensitivities as ident
 from codegen import simulate
 from codegen.simulator import Simulator
 from phs import ParameterError

@@ -44,8 +44,8 @@ from phs.workflows.sweep import (
     from_fit,
     sweep,
 )
-from phs.workflows.sweep_metrics import Metric, energy, final, fit, metric, peak, rise_time, rise_time_of, values_at
-from phs.workflows.sweep_store import read_rows
+from phs.workflows.sweep.metrics import Metric, energy, final, fit, metric, peak, rise_time, rise_time_of, values_at
+from phs.workflows.sweep.store import read_rows
 
 ROOT = Path(__file__).resolve().parents[2]
 REL = 1e-12  # relative agreement of two code paths through the same integrators (observed: bitwise)

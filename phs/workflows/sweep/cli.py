@@ -33,8 +33,13 @@ import numpy as np
 
 from phs.errors import InputDataError, ParameterError
 from phs.io import write_atomic
+from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _positive
 from phs.workflows.inputs import input_signals, parse_assignments
 from phs.workflows.loader import load_model
+from phs.workflows.sweep.design import LogUniform, Uniform, from_fit
+from phs.workflows.sweep.metrics import metric
+from phs.workflows.sweep.run import sweep
+from phs.workflows.sweep.study import Study
 
 
 def add_subcommand(sub) -> None:
@@ -48,8 +53,6 @@ def add_subcommand(sub) -> None:
     >>> sorted(sub.choices)
     ['sweep']
     """
-    from phs.workflows.cli import _add_model_options, _positive
-
     p = sub.add_parser(
         "sweep", help="evaluate a model over a grid or samples of parameters (metrics per run)",
         description="Simulate MODEL for every combination of the --range grid axes (and --samples drawn "
@@ -109,8 +112,6 @@ def parse_range(item: str):
     >>> parse_range("b=0.5:2")
     ('b', Uniform(low=0.5, high=2.0))
     """
-    from phs.workflows.sweep import LogUniform, Uniform
-
     [(name, spec)] = parse_assignments([item], "--range").items()
 
     def number(text):
@@ -188,10 +189,6 @@ def run_sweep(args) -> int:
     The study is checked completely (model, ranges, metrics, inputs, files) before the first run;
     rows are then written to ``--out`` as runs finish, and the figure and JSON summary at the end.
     """
-    from phs.workflows.cli import _check_writable, _finite_or_none
-    from phs.workflows.sweep import Study, from_fit, sweep
-    from phs.workflows.sweep_metrics import metric
-
     _check_writable(args.out, args.plot, args.json)
     if args.scheduler is not None and args.processes is not None:
         raise InputDataError("give either --processes (a local Dask cluster) or --scheduler ADDRESS, not both")

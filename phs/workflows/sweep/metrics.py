@@ -254,7 +254,7 @@ def fit(recording, channel: str, name: str | None = None) -> Metric:
     y = np.asarray(recording[channel], dtype=float)
 
     def f(res):
-        from phs.workflows.identify import nrmse_fit
+        from phs.workflows.identify.scoring import nrmse_fit
 
         return nrmse_fit(y, _signal(res, channel))
 

@@ -1,0 +1,74 @@
+"""Options and checks shared by the subcommands of the ``phs`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+import numpy as np
+
+from phs.errors import InputDataError
+
+
+def _add_model_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", metavar="MODEL", help="module:function or path/file.py:function returning a PHSystem")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="override a parameter")
+    p.add_argument("--time", default="t", metavar="COLUMN", help="time column of CSV files (default: t)")
+    p.add_argument("--map", action="append", default=[], metavar="COLUMN=SIGNAL",
+                   help="read model signal SIGNAL from CSV column COLUMN (default: same names)")
+    p.add_argument("--json", metavar="FILE", help="write a JSON summary")
+
+
+def _positive(option: str, integer: bool = False):
+    """argparse type: a positive finite number (an integer >= 1 when ``integer``), errors naming the option."""
+    what = "a positive integer" if integer else "a positive finite number"
+
+    def convert(text: str):
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} must be {what}, got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"{option} must be {what}, got {text!r}")
+        return v
+
+    return convert
+
+
+def _check_writable(*paths: str | None) -> None:
+    """Fail before any work when an output's directory does not exist."""
+    for path in paths:
+        if path is None:
+            continue
+        d = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(d):
+            raise InputDataError(f"cannot write {path!r}: directory {d!r} does not exist")
+
+
+def _name_list(text: str | None, option: str) -> list[str]:
+    """``"a, b,c"`` -> ``["a", "b", "c"]``; empty items and repeats are errors naming the option."""
+    if text is None:
+        return []
+    names = [n.strip() for n in text.split(",")]
+    if not any(names) or "" in names:
+        raise InputDataError(f"{option} {text!r}: expected NAME,NAME,... without empty names")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputDataError(f"{option}: {dup[0]!r} is given twice")
+    return names
+
+
+def _finite_or_none(obj):
+    """JSON-ready copy: NaN and infinities become null (strict JSON has no NaN)."""
+    if isinstance(obj, dict):
+        return {str(k): _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.ndarray):
+        return _finite_or_none(obj.tolist())
+    return obj

@@ -1,0 +1,145 @@
+"""The model and the recordings of the subcommands that fit a model to a recording (``fit``, ``diagnose``)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from phs.errors import InputDataError
+from phs.workflows.cli_options import _name_list, _positive
+from phs.workflows.inputs import parse_assignments
+from phs.workflows.loader import load_model
+
+
+def add_recording_options(p: argparse.ArgumentParser) -> None:
+    """Options of the subcommands that fit a model to a recording (``fit``, ``diagnose``)."""
+    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
+    p.add_argument("--scale", action="append", default=[], metavar="COLUMN=FROM:TO",
+                   help="convert a column's unit (pos=mm:m, volt=kV:V) or multiply it by a factor (COLUMN=FACTOR)")
+    p.add_argument("--resample", type=_positive("--resample"), metavar="DT",
+                   help="resample the recordings onto a uniform grid of step DT [s] (linear interpolation)")
+    p.add_argument("--outputs", metavar="NAME,NAME",
+                   help="measured outputs to fit (default: every one the recording provides)")
+    p.add_argument("--validate", metavar="DATA2", help="second CSV recording scored with the fitted model")
+
+
+def parse_scales(items) -> dict:
+    """Parse ``--scale COLUMN=FROM:TO`` (unit conversion) or ``COLUMN=FACTOR`` values.
+
+    Raises
+    ------
+    InputDataError
+        Naming the option and the column: malformed item, unknown unit, units of different
+        dimensions, a factor that is not a finite non-zero number.
+
+    Examples
+    --------
+    >>> parse_scales(["pos=mm:m", "volt=kV:V", "i=0.5"])
+    {'pos': ('mm', 'm'), 'volt': ('kV', 'V'), 'i': 0.5}
+    >>> parse_scales(["pos=mm:V"])
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: --scale pos=mm:V: cannot convert 'mm' to 'V': different dimensions
+    """
+    from phs.workflows.recording import unit_factor
+
+    out: dict = {}
+    for column, value in parse_assignments(items, "--scale").items():
+        if ":" in value:
+            src, _, dst = value.partition(":")
+            src, dst = src.strip(), dst.strip()
+            if not src or not dst:
+                raise InputDataError(f"--scale {column}={value}: expected FROM:TO units such as mm:m")
+            try:
+                unit_factor(src, dst)
+            except InputDataError as exc:
+                raise InputDataError(f"--scale {column}={value}: {exc}") from None
+            out[column] = (src, dst)
+            continue
+        try:
+            factor = float(value)
+        except ValueError:
+            raise InputDataError(f"--scale {column}={value}: expected FROM:TO units (mm:m) or a number") from None
+        if not (math.isfinite(factor) and factor != 0):
+            raise InputDataError(f"--scale {column}={value}: the factor must be a finite non-zero number")
+        out[column] = factor
+    return out
+
+
+def _csv_header(path: str) -> list[str] | None:
+    """Column names of a CSV file, or None when it cannot be read (the recording reader then says why)."""
+    import csv
+
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            for cells in csv.reader(fh):
+                if cells and any(c.strip() for c in cells):
+                    return [c.strip() for c in cells]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return None
+    return None
+
+
+def _read_recording(path: str, system, args, mapping: dict, scales: dict, outputs: list[str]):
+    """Read the columns of ``path`` that the fit needs (inputs and fitted outputs) as a Recording."""
+    from phs.workflows.recording import Recording
+
+    known = system.measured_names + system.output_names + system.state_names
+    column_of = {sig: col for col, sig in mapping.items()}
+    header = _csv_header(path)
+    columns = None
+    if header is not None:
+        if outputs:
+            wanted = system.input_names + outputs
+        else:
+            signal_of = {c: mapping.get(c, c) for c in header if c != args.time}
+            wanted = system.input_names + [signal_of[c] for c in signal_of if signal_of[c] in known]
+        columns = list(dict.fromkeys(column_of.get(sig, sig) for sig in wanted))
+        columns += [c for c in scales if c in header and c not in columns and c != args.time]
+    try:
+        return Recording.from_csv(path, time_column=args.time, mapping=mapping, scales=scales,
+                                  resample=args.resample, columns=columns)
+    except InputDataError as exc:  # say it with the command line's option names
+        raise InputDataError(str(exc).replace("pass resample=DT", "pass --resample DT")) from None
+
+
+def model_and_recordings(args: argparse.Namespace):
+    """Load the model and the recordings of a fitting subcommand (``fit``, ``diagnose``), checking every
+    name given on the command line first.  Returns ``(system, recording, validation or None, free,
+    fitted outputs, x0)``."""
+    params = parse_assignments(args.param, "--param", numeric=True)
+    x0 = parse_assignments(args.x0, "--x0", numeric=True)
+    mapping = parse_assignments(args.map, "--map")
+    scales = parse_scales(args.scale)
+    free = _name_list(args.free, "--free")
+    outputs = _name_list(args.outputs, "--outputs")
+    system = load_model(args.model, params)
+    for name in free:
+        system.param(name)  # ParameterError naming an unknown parameter and the known ones
+    known = system.measured_names + system.output_names + system.state_names
+    seen: dict = {}
+    for column, signal in mapping.items():
+        if signal in seen:
+            raise InputDataError(f"--map: signal {signal!r} is mapped from two columns ({seen[signal]!r} and "
+                                 f"{column!r})")
+        seen[signal] = column
+        if signal not in system.input_names and signal not in known:
+            raise InputDataError(f"--map {column}={signal}: system {system.name!r} has no input or output "
+                                 f"{signal!r} (inputs: {', '.join(system.input_names) or 'none'}; measured: "
+                                 f"{', '.join(system.measured_names) or 'none'})")
+    bad = [o for o in outputs if o not in known]
+    if bad:
+        raise InputDataError(f"--outputs: system {system.name!r} has no output {bad[0]!r} "
+                             f"(measured: {', '.join(system.measured_names) or 'none'})")
+    if x0:
+        unknown = [k for k in x0 if k not in system.state_names]
+        if unknown:
+            raise InputDataError(f"--x0: system {system.name!r} has no state {unknown[0]!r} "
+                                 f"(states: {', '.join(system.state_names)})")
+    rec = _read_recording(args.data, system, args, mapping, scales, outputs)
+    _, fitted_outputs = rec.check_for(system, outputs or None)
+    val = None
+    if args.validate is not None:
+        val = _read_recording(args.validate, system, args, mapping, scales, fitted_outputs)
+        val.check_for(system, fitted_outputs)
+    return system, rec, val, free, fitted_outputs, x0

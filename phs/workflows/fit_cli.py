@@ -1,0 +1,122 @@
+"""``phs fit``: fit parameters of a model to a CSV recording by output error
+(:func:`phs.workflows.identify.identify`), with a JSON summary and a report directory."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+
+from phs.errors import InputDataError
+from phs.io import write_atomic
+from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _positive
+from phs.workflows.cli_recordings import add_recording_options, model_and_recordings
+
+
+def add_subcommand(sub) -> None:
+    """Add the ``fit`` subcommand to the ``phs`` parser (``sub`` is its subparsers object).
+
+    Examples
+    --------
+    >>> from phs.workflows.cli import build_parser
+    >>> args = build_parser().parse_args(["fit", "systems.examples:rc_circuit", "data.csv", "--free", "R.R"])
+    >>> args.free, args.max_iter, args.report, args.quiet
+    ('R.R', 100, None, False)
+    """
+    p = sub.add_parser(
+        "fit", help="fit parameters of a model to a recording (output error)",
+        description="Fit the --free parameters of MODEL to the recording DATA (CSV) by output error, print the "
+                    "fitted values with confidence intervals and the NRMSE fit % per channel, and write a JSON "
+                    "summary (--json) and a report directory (--report: fit.png, sensitivity.md, summary.txt).")
+    _add_model_options(p)
+    p.add_argument("data", metavar="DATA", help="CSV recording: a time column, the model's inputs and measured outputs")
+    p.add_argument("--free", required=True, metavar="NAME,NAME", help="parameters to fit (comma-separated)")
+    add_recording_options(p)
+    p.add_argument("--report", metavar="DIR", help="write DIR/fit.png, DIR/sensitivity.md and DIR/summary.txt")
+    p.add_argument("--max-iter", type=_positive("--max-iter", integer=True), default=100, metavar="N",
+                   help="maximum number of residual evaluations (default 100)")
+    p.add_argument("--quiet", action="store_true", help="do not print the optimiser's progress on stderr")
+    p.set_defaults(run=run_fit)
+
+
+def run_fit(args: argparse.Namespace) -> int:
+    """Run ``phs fit`` with parsed arguments; returns the exit code.
+
+    Every check, the fit, the validation, the sensitivity table and every output (figure,
+    markdown, summary, JSON) are prepared in memory before the first file is written, so an
+    error writes nothing.
+    """
+    _check_writable(args.json)
+    if args.report is not None:
+        if os.path.exists(args.report) and not os.path.isdir(args.report):
+            raise InputDataError(f"--report {args.report!r} exists and is not a directory")
+        _check_writable(os.path.join(args.report, "summary.txt") if os.path.isdir(args.report) else args.report)
+    system, rec, val, free, fitted_outputs, x0 = model_and_recordings(args)
+
+    # imported here: casadi is only needed once a model runs
+    from phs.workflows.identify import identify, sensitivity_markdown
+
+    result = identify(system, rec, free, x0=x0 or None, outputs=fitted_outputs, validation=val,
+                      max_iter=args.max_iter, progress=not args.quiet)
+    summary = _fit_summary_text(args, result)
+    sensitivity = {}
+    png = markdown = None
+    if args.report is not None:
+        for ch in reversed(fitted_outputs):  # the first channel last: it is the one kept in result.sensitivity
+            sensitivity[ch] = result.sensitivity_table(channel=ch)
+        sensitivity = {ch: sensitivity[ch] for ch in fitted_outputs}
+        png = _fit_figure_png(result)
+        markdown = sensitivity_markdown(sensitivity, result)
+    document = _fit_json(args, result, val, sensitivity) if args.json else None
+    print(summary)
+
+    if args.report is not None:
+        os.makedirs(args.report, exist_ok=True)
+        write_atomic(os.path.join(args.report, "fit.png"), png)
+        write_atomic(os.path.join(args.report, "sensitivity.md"), markdown)
+        write_atomic(os.path.join(args.report, "summary.txt"), summary + "\n")
+    if document is not None:
+        write_atomic(args.json, document)
+    return 0
+
+
+def _fit_summary_text(args: argparse.Namespace, result) -> str:
+    import phs
+
+    head = [f"phs {phs.__version__} fit {args.model} {args.data}" + (f" --validate {args.validate}" if args.validate
+                                                                      else ""),
+            f"model hash {result.system.model_hash()}; {len(result.residuals[result.outputs[0]])} samples; "
+            f"outputs {', '.join(result.outputs)}"]
+    return "\n".join(head + [result.summary()])
+
+
+def _fit_figure_png(result) -> bytes:
+    import matplotlib.pyplot as plt
+
+    fig = result.plot()
+    try:
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=90)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+def _fit_json(args: argparse.Namespace, result, val, sensitivity: dict) -> str:
+    import phs
+
+    doc = result.to_dict()
+    doc.update({
+        "command": "fit",
+        "model": args.model,
+        "data": args.data,
+        "phs_version": phs.__version__,
+        "x0": {name: float(v) for name, v in zip(result.system.state_names, result.x0, strict=True)},
+        "validation": None if val is None else {"data": args.validate, "samples": len(val),
+                                                "fit_percent": result.validation_fit_percent},
+    })
+    if sensitivity:
+        doc["sensitivity_by_channel"] = {ch: {k: {str(s): f for s, f in row.items()} for k, row in table.items()}
+                                         for ch, table in sensitivity.items()}
+    return json.dumps(_finite_or_none(doc), indent=1, allow_nan=False) + "\n"

@@ -1,0 +1,382 @@
+"""The weighted output-error residual of a fit and its exact Jacobian from CVODES forward sensitivities.
+
+The recording is cut into segments (at the recorded inputs' kinks, or where the step bound of a
+smooth input changes, and at the multiple-shooting windows' edges); each segment is one CVODES
+call from the end of the previous one, and its forward sensitivities are integrated with the state.
+Large fits run the dynamics, their derivatives and the output functions as compiled C
+(:mod:`phs.workflows.identify.c_library`).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import casadi as ca
+import numpy as np
+import sympy as sp
+
+from codegen.functions import _model_hash, generate
+from codegen.simulator import Simulator, step_windows
+from phs.params import TIME
+from phs.workflows.identify.c_library import _Library
+
+
+def _kinks(U: np.ndarray) -> list[int]:
+    """Sample indices where a uniformly sampled input's slope changes (its linear interpolant's kinks)."""
+    if U.size == 0 or len(U) < 3:
+        return []
+    d2 = np.abs(U[2:] - 2 * U[1:-1] + U[:-2])
+    tol = 1e-12 * max(float(np.max(np.abs(U))), 1e-300)
+    return sorted({int(k) + 1 for k in np.nonzero(np.any(d2 > tol, axis=1))[0]})
+
+
+# compile by default when the fit is large: samples x (1 + directions) x the dynamics' size above this
+# (the dynamics' C library, with their forward derivatives, takes a few seconds to build once per
+# model and is then loaded from the disk cache; the sensitivities run 2-3 times faster compiled)
+_COMPILE_WORK = 2e7
+
+
+def _decide_compile(compile, gen, N: int, n_dir: int, templated: bool) -> bool:
+    """Whether to compile the fit's functions to C.  ``compile=None``: when a C compiler exists, the
+    inputs are templates (not data baked into the code) and the fit is large (see ``_COMPILE_WORK``)."""
+    if compile is not None:
+        return bool(compile)
+    if not templated or _c_compiler() is None:
+        return False
+    return N * (1 + n_dir) * gen.rhs.n_instructions() >= _COMPILE_WORK
+
+
+def _c_compiler():
+    return shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
+
+
+class _Problem:
+    """The weighted output-error residual and its exact Jacobian in the fit coordinates.
+
+    ``z = [theta, xi, vec(S)]``: the free parameters' coordinates (``p / p_start`` or
+    ``log(p / p_start)``), the estimated initial states (scaled, ``x / s``) and, with multiple
+    shooting, the scaled start state of every window after the first (window by window).
+
+    The recording is cut into segments (at the input's kinks and the windows' edges), each
+    integrated by one CVODES call from the end of the previous one.  The Jacobian comes from
+    CVODES forward sensitivities (integrators built with CasADi's ``nfwd``: the state and its
+    sensitivities integrated together, one Newton matrix for all directions) seeded by the
+    derivative of the parameter vector with respect to ``theta`` and by the window's start
+    state; the outputs' sensitivities follow from the output function's
+    Jacobian at each sample.  Everything runs numerically on the recording's grid: nothing is
+    built per recording beyond one integrator per segment length.
+    """
+
+    def __init__(self, system, recording, free, log_scaled, outputs, weights, x0, estimate_x0, rtol, atol,
+                 shooting: int = 1, defect_weight: float = 1e3, compile: bool | None = None, params=None):
+        # ``params``: the parameter values (default the system's); the generated functions depend on
+        # the structure only, so ``system`` may be any system of the same structure (whose functions
+        # are already generated)
+        self.system = system
+        t = recording.t
+        N = len(t)
+        self.N = N
+        nx, nu = len(system.states), len(system.inputs)
+        self.nx = nx
+        pnames = system.param_names
+        self.p0 = p0 = np.array(system.param_vector() if params is None else params, dtype=float)
+        self.nominal = np.array([p0[pnames.index(k)] for k in free])
+        self.ifree = [pnames.index(k) for k in free]
+        self.is_log = np.array([k in log_scaled for k in free], dtype=bool)
+        self.n_theta = len(free)
+        self.ixi = [system.state_names.index(n) for n in estimate_x0]
+        self.n_xi = len(estimate_x0)
+        self.x0 = np.asarray(x0, dtype=float)
+        U = np.column_stack([recording[u] for u in system.input_names]) if nu else np.zeros((N, 0))
+        self.U = U
+        grids = [(t, U[:, j]) for j in range(nu)]
+        # multiple shooting: K windows, each integrated from its own (scaled) initial state; the
+        # continuity defects enter the least squares with a large weight (quadratic penalty)
+        K = max(1, min(int(shooting), (N - 1) // 3))
+        self.K = K
+        self.ms_edges = [int(e) for e in np.linspace(0, N - 1, K + 1).round().astype(int)]
+        self.window_starts = np.array(self.ms_edges[1:-1], dtype=int)
+        # directions of the sensitivities in each window: theta, then the window's own start
+        # (the estimated initial states in the first window, the whole start state in the others)
+        self.n_dir = nd = self.n_theta + max(self.n_xi, nx if K > 1 else 0)
+        # a recorded input that is piecewise linear with few kinks (steps, staircases, square waves
+        # as sampled) is integrated piece by piece with restarts at its kinks, so CVODES takes long
+        # steps in between; otherwise it is interpolated and the step bounded by the sample interval
+        # (in windows whose step bound follows the input's smoothness: see ``step_windows``)
+        kinks = _kinks(U)
+        piecewise = nu > 0 and len(kinks) <= max(20, (N - 1) // 20)
+        windows = step_windows(U) if nu > 0 and not piecewise else []
+        cuts = sorted(set(self.ms_edges) | (set(kinks) if piecewise else {w[0] for w in windows}))
+        bound = np.ones(N)  # the step bound of the window each sample interval belongs to
+        for w0, w1, m in windows:
+            bound[w0:w1] = m
+        gen = generate(system)
+        scale = np.array([st.typical for st in system.states], dtype=float)  # the simulator's scaling
+        # the fitted channels and their Jacobians at one sample (mapped over the recording below)
+        sx = gen.sx
+        rows = []
+        for ch in outputs:
+            if ch in system.measured_names:
+                rows.append(sx["measured"][system.measured_names.index(ch)])
+            elif ch in system.output_names:
+                rows.append(sx["y"][system.output_names.index(ch)])
+            else:
+                rows.append(sx["x"][system.state_names.index(ch)])
+        yv = ca.vertcat(*rows)
+        xs, us, ps = sx["x"], sx["u"], sx["p"]
+        self.n_out = len(outputs)
+        fy = ca.Function("identify_outputs", [xs, us, ps], [yv])
+        # d y / d z (scaled states) and d y / d p for the free parameters
+        fyj = ca.Function("identify_output_jacobians", [xs, us, ps],
+                          [ca.densify(ca.mtimes(ca.jacobian(yv, xs), ca.diag(ca.DM(scale)))),
+                           ca.densify(ca.jacobian(yv, ps[self.ifree]))])
+        # compiled code: the dynamics with their Jacobian and forward derivative (which CVODES's
+        # sensitivities call) in one library, the output functions in another (built by a second
+        # compiler process meanwhile); both cached on disk
+        self.compiled = _decide_compile(compile, gen, N, nd, piecewise or nu == 0)
+        cc = _c_compiler() if self.compiled else None
+        mhash = _model_hash(system)
+        key = f"{mhash}|identify|{nd}"
+        outputs_lib = None
+        if self.compiled:  # compiles while the dynamics' library is built
+            outputs_lib = _Library([fy, fyj], f"{mhash}|{list(outputs)}|{self.ifree}|{scale.tolist()}", cc)
+
+        def compiler(fun, fkey):
+            # CVODES's sensitivities call the dynamics' forward derivative one direction at a time
+            return _Library([fun], f"{fkey}|{key}", cc, jacobian=True, forward=(1,)).load()[0]
+
+        try:
+            # no energy quadratures; the second-order correction of the sensitivity Jacobian changes
+            # the sensitivities by ~1e-7 relative and costs most of the time.  ``sens`` integrates the
+            # state and its nd forward sensitivities together (CasADi's ``nfwd``: one Newton matrix
+            # for all directions)
+            opts = {"second_order_correction": False}
+            sim = Simulator(system, rtol=rtol, atol=atol, energy=False, compile=self.compiled, compiler=compiler,
+                            integrator_options=opts)
+            sens = Simulator(system, rtol=rtol, atol=atol, energy=False, compile=self.compiled, compiler=compiler,
+                             integrator_options={**opts, "nfwd": nd})
+            self.scale = sim.scale
+            lin = "_c0 + _c1*t"
+            tmpl = sp.sympify(lin, locals={"t": TIME, "_c0": sp.Symbol("_c0", real=True),
+                                           "_c1": sp.Symbol("_c1", real=True)})
+            slots = [[(sp.srepr(tmpl), tmpl, 2)] for _ in range(nu)] if piecewise else [[] for _ in range(nu)]
+            dt = t[1] - t[0]
+            # segments: (first sample, last sample, integrator, sensitivity integrator, the integrator
+            # parameters after p)
+            self.segments = []
+            for i0, i1 in zip(cuts[:-1], cuts[1:]):
+                if piecewise:
+                    F, _layout = sim._integrator(i1 - i0, slots, [None] * nu)
+                    Fs, _layout = sens._integrator(i1 - i0, slots, [None] * nu)
+                    coef = []
+                    for j in range(nu):
+                        slope = (U[i1, j] - U[i0, j]) / (t[i1] - t[i0])
+                        coef += [1.0, U[i0, j] - slope * t[i0], slope]
+                    tail = np.array([t[i0], dt] + coef)
+                else:
+                    ms = float(np.min(bound[i0:i1]))
+                    F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
+                    Fs, _layout = sens._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
+                    tail = np.array([t[i0], dt])
+                self.segments.append((i0, i1, F, Fs, tail))
+            if outputs_lib is not None:
+                fy, fyj = outputs_lib.load()
+        finally:
+            if outputs_lib is not None:
+                outputs_lib.discard()  # after a failure: nothing left running or half-written
+        self.n_P = len(p0) + len(self.segments[0][4])
+        self._fy, self._fyj = fy.map(N, "serial"), fyj.map(N, "serial")
+        self.Ymeas = np.vstack([recording[ch] for ch in outputs])
+        self.W = np.array([weights[ch] for ch in outputs], dtype=float)
+        self.n_outputs_residual = N * self.n_out
+        self.n_z = self.n_theta + self.n_xi + nx * (K - 1)
+        self.n_rows = self.n_outputs_residual + nx * (K - 1)
+        self.defect_weight = defect_weight
+        self._last = None  # (z bytes, states, window ends) of the last nominal simulation
+        self._last_res = None  # (z and defect weight bytes, residual) of the last residual
+        self._last_jac = None  # (z and defect weight bytes, residual, Jacobian) of the last Jacobian
+
+    # -- the coordinates ----------------------------------------------------------------------
+    def _params(self, z):
+        """Parameter vector and d p_free / d theta (diagonal) at ``z``."""
+        th = np.asarray(z[: self.n_theta], dtype=float)
+        g = np.where(self.is_log, np.exp(th), 1.0)
+        p = self.p0.copy()
+        p[self.ifree] = self.nominal * np.where(self.is_log, g, th)
+        return p, self.nominal * g
+
+    def _window_start(self, z, k) -> np.ndarray:
+        """Scaled start state of window ``k``."""
+        if k == 0:
+            z0 = self.x0 / self.scale
+            z0[self.ixi] = z[self.n_theta: self.n_theta + self.n_xi]
+            return z0
+        o = self.n_theta + self.n_xi + (k - 1) * self.nx
+        return np.array(z[o: o + self.nx], dtype=float)
+
+    # -- simulation ---------------------------------------------------------------------------
+    def _simulate(self, z):
+        """Scaled states at every sample (N, nx) and the scaled end state of every window."""
+        key = np.asarray(z, dtype=float).tobytes()
+        if self._last is not None and self._last[0] == key:
+            return self._last[1], self._last[2]
+        p, _ = self._params(z)
+        Z = np.empty((self.N, self.nx))
+        ends = []
+        seg = iter(self.segments)
+        for k in range(self.K):
+            e0, e1 = self.ms_edges[k], self.ms_edges[k + 1]
+            zc = self._window_start(z, k)
+            Z[e0] = zc
+            i1 = e0
+            while i1 < e1:
+                i0, i1, F, _Fs, tail = next(seg)
+                zs = _integrate(F, zc, np.concatenate([p, tail]), self.nx, i1 - i0)
+                Z[i0 + 1: i1 + 1] = zs
+                zc = zs[-1]
+            ends.append(zc.copy())
+        self._last = (key, Z, ends)
+        return Z, ends
+
+    def _residual(self, z, Z, ends, p):
+        Y = _map_call(self._fy, [Z * self.scale, self.U, np.broadcast_to(p, (self.N, len(p)))], [(self.n_out,)])[0]
+        r_out = ((Y.T - self.Ymeas) * self.W[:, None]).reshape(-1)  # channel by channel
+        if self.K == 1:
+            return r_out
+        defects = [ends[k] - self._window_start(z, k + 1) for k in range(self.K - 1)]
+        return np.concatenate([r_out, self.defect_weight * np.concatenate(defects)])
+
+    def outputs(self, z) -> np.ndarray:
+        """Simulated fitted channels (n_out, N) at ``z``."""
+        Z, _ = self._simulate(z)
+        p = self._params(z)[0]
+        return _map_call(self._fy, [Z * self.scale, self.U, np.broadcast_to(p, (self.N, len(p)))], [(self.n_out,)])[0].T
+
+    def res(self, z):
+        key = np.asarray(z, dtype=float).tobytes() + np.float64(self.defect_weight).tobytes()
+        if self._last_res is not None and self._last_res[0] == key:
+            return self._last_res[1].copy()
+        Z, ends = self._simulate(z)
+        if not np.all(np.isfinite(Z)):
+            raise RuntimeError("non-finite state")
+        r = self._residual(z, Z, ends, self._params(z)[0])
+        self._last_res = (key, r)
+        return r.copy()
+
+    def jac(self, z):
+        """Residual and its Jacobian (n_rows, n_z) at ``z``."""
+        key = np.asarray(z, dtype=float).tobytes() + np.float64(self.defect_weight).tobytes()
+        if self._last_jac is not None and self._last_jac[0] == key:
+            return self._last_jac[1].copy(), self._last_jac[2].copy()
+        r, J = self._jac(z)
+        self._last_jac = (key, r, J)
+        return r.copy(), J.copy()
+
+    def _jac(self, z):
+        r = self.res(z)
+        p, dp = self._params(z)
+        nx, nth, nd, N = self.nx, self.n_theta, self.n_dir, self.N
+        seed_p = np.zeros((nd, self.n_P))  # row d: the seed of direction d (C order = column-major (n_P, nd))
+        seed_p[np.arange(nth), self.ifree] = dp
+        Z = np.empty((N, nx))  # the state integrated with its sensitivities
+        dZ = np.empty((N, nx, nd))  # d z_i / d (window directions)
+        dends = []
+        seg = iter(self.segments)
+        for k in range(self.K):
+            e0, e1 = self.ms_edges[k], self.ms_edges[k + 1]
+            zc = self._window_start(z, k)
+            S = np.zeros((nx, nd))
+            if k == 0:
+                S[self.ixi, nth + np.arange(self.n_xi)] = 1.0
+            else:
+                S[:, nth: nth + nx] = np.eye(nx)
+            Z[e0], dZ[e0] = zc, S
+            i1 = e0
+            while i1 < e1:
+                i0, i1, _F, Fs, tail = next(seg)
+                zs, dzs = _integrate_sensitivities(Fs, zc, S, np.concatenate([p, tail]), seed_p, i1 - i0)
+                Z[i0 + 1: i1 + 1], dZ[i0 + 1: i1 + 1] = zs, dzs
+                zc, S = zs[-1], dzs[-1]
+            dends.append(S.copy())
+        if not (np.all(np.isfinite(Z)) and np.all(np.isfinite(dZ))):
+            raise RuntimeError("non-finite sensitivity")
+        Cx, Cp = _map_call(self._fyj, [Z * self.scale, self.U, np.broadcast_to(p, (N, len(p)))],
+                           [(nx, self.n_out), (nth, self.n_out)])
+        # d y_i / d directions = C_x,i dz_i (+ C_p,i dp/dtheta in the theta directions)
+        dY = np.matmul(Cx.transpose(0, 2, 1), dZ)  # (N, n_out, nd)
+        dY[:, :, :nth] += Cp.transpose(0, 2, 1) * dp
+        J = np.zeros((self.n_rows, self.n_z))
+        for c in range(self.n_out):
+            rows = slice(c * N, (c + 1) * N)
+            Jc = J[rows]
+            Jc[:, :nth] = self.W[c] * dY[:, c, :nth]
+            for k in range(self.K):
+                e0, e1 = self.ms_edges[k], self.ms_edges[k + 1]
+                hi = e1 + 1 if k == self.K - 1 else e1  # a window's last sample is the next one's start
+                cols = self._window_columns(k)
+                Jc[e0:hi, cols] = self.W[c] * dY[e0:hi, c, nth: nth + (cols.stop - cols.start)]
+        for k in range(self.K - 1):
+            rows = slice(self.n_outputs_residual + k * nx, self.n_outputs_residual + (k + 1) * nx)
+            wd = self.defect_weight
+            J[rows, :nth] = wd * dends[k][:, :nth]
+            cols = self._window_columns(k)
+            J[rows, cols] = wd * dends[k][:, nth: nth + (cols.stop - cols.start)]
+            nxt = self._window_columns(k + 1)
+            J[rows, nxt] -= wd * np.eye(nx)
+        return r, J
+
+    def _window_columns(self, k) -> slice:
+        """Columns of ``z`` that are the start-state directions of window ``k``."""
+        if k == 0:
+            return slice(self.n_theta, self.n_theta + self.n_xi)
+        o = self.n_theta + self.n_xi + (k - 1) * self.nx
+        return slice(o, o + self.nx)
+
+    def values(self, z, log_scaled, free):
+        th = z[: self.n_theta]
+        return {k: float(self.nominal[i] * (np.exp(th[i]) if k in log_scaled else th[i])) for i, k in enumerate(free)}
+
+
+def _integrate(F, z0, P, nx: int, n: int) -> np.ndarray:
+    """Scaled states (n, nx) at the integrator's n output times (buffers written in place)."""
+    buf, trigger = F.buffer()
+    z0 = np.ascontiguousarray(z0, dtype=float)
+    P = np.ascontiguousarray(P, dtype=float)
+    out = np.empty((n, nx))
+    buf.set_arg(0, memoryview(z0))
+    buf.set_arg(2, memoryview(P))
+    buf.set_res(0, memoryview(out))
+    trigger()
+    return out
+
+
+def _integrate_sensitivities(Fs, z0, S0, P, seed_p, n: int):
+    """States (n, nx) and forward sensitivities (n, nx, nd) at the output times of an integrator
+    built with ``nfwd = nd``, for the seeds ``S0`` (nx, nd) of the initial state and ``seed_p``
+    (nd, n_P) of the parameters."""
+    nd, nx = seed_p.shape[0], len(z0)
+    buf, trigger = Fs.buffer()
+    x0 = np.ascontiguousarray(np.vstack([z0, S0.T]))  # column-major (nx, 1 + nd)
+    pp = np.ascontiguousarray(np.vstack([P, seed_p]))  # column-major (n_P, 1 + nd)
+    out = np.empty((n, 1 + nd, nx))  # column-major (nx, (1 + nd) n): output time by output time
+    buf.set_arg(0, memoryview(x0))
+    buf.set_arg(2, memoryview(pp))
+    buf.set_res(0, memoryview(out))
+    trigger()
+    return out[:, 0, :], out[:, 1:, :].transpose(0, 2, 1)
+
+
+def _map_call(F, args, shapes) -> list[np.ndarray]:
+    """Call a function mapped over N samples with per-sample arguments given as (N, k) arrays;
+    returns each output as an (N, *shape) array (shape of the per-sample output, column-major)."""
+    N = args[0].shape[0]
+    buf, trigger = F.buffer()
+    keep = [np.ascontiguousarray(a, dtype=float) for a in args]
+    for i, a in enumerate(keep):
+        buf.set_arg(i, memoryview(a))
+    outs = [np.empty((N, *shape)) for shape in shapes]
+    for i, o in enumerate(outs):
+        buf.set_res(i, memoryview(o))
+    trigger()
+    return outs

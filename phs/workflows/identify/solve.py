@@ -1,0 +1,193 @@
+"""The identification driver: output-error least squares of the free parameters (and initial states).
+
+The residual and its exact Jacobian come from :mod:`phs.workflows.identify.sensitivities`; the least
+squares are solved by scipy's trust-region reflective method with that Jacobian, with multiple
+shooting as a continuation on the weight of the windows' continuity defects.
+"""
+
+from __future__ import annotations
+
+import sys
+import time as _time
+
+import numpy as np
+import scipy.optimize
+
+from codegen.simulator import Simulator, simulate
+from phs.errors import InputDataError, ParameterError, PHSError, SimulationError
+from phs.signals import Sampled
+from phs.workflows.identify.coordinates import _bounds, _channel_weights, _log_scaled
+from phs.workflows.identify.result import IdentificationResult, _uncertainty
+from phs.workflows.identify.scoring import _simulate_outputs, nrmse_fit
+from phs.workflows.identify.sensitivities import _Problem
+
+
+def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, weights=None, log_scale=None,
+             estimate_x0=(), validation=None, initial=None, rtol: float = 1e-8, atol: float | None = None,
+             max_iter: int = 100, ftol: float = 1e-8, shooting: int = 1, progress: bool = False,
+             compile: bool | None = None) -> IdentificationResult:
+    """Fit parameters ``free`` of ``system`` to ``recording`` by output error.
+
+    Parameters
+    ----------
+    system : PHSystem
+    recording : phs.workflows.recording.Recording
+        Uniformly sampled; provides every input of the system and the fitted outputs.
+    free : sequence of str
+        Parameters to fit.
+    bounds : dict of str -> (lo, hi), optional
+        Bounds in the parameters' units (default: each parameter's declared range).
+    x0 : dict or array, optional
+        Initial state (default: the simulator's default).
+    outputs : sequence of str, optional
+        Measured outputs (or port outputs, states) to fit; default every one in the recording.
+    weights : dict of str -> float, optional
+        Weight per channel; default ``1 / std`` of the measured channel (channels in different
+        units count alike).
+    log_scale : sequence of str, optional
+        Parameters fitted in log scale; default those whose declared range spans >= 1.5 decades.
+    estimate_x0 : sequence of str
+        Initial states estimated with the parameters.
+    validation : Recording, optional
+        Scored with the fitted model.
+    initial : dict, optional
+        Starting values (default: the system's current values).
+    shooting : int
+        Number of multiple-shooting windows (1: single shooting).  Each window starts from its own
+        state, estimated with the parameters; continuity between windows enters the least squares
+        as heavily weighted defects.  Helps oscillatory or drifting systems whose single-shooting
+        cost has many local minima.
+    max_iter : int
+        Maximum number of residual evaluations.
+    ftol : float
+        Stop when the relative decrease of the cost in a step is below this.
+    progress : bool
+        Print the cost at each iteration on stderr.
+    compile : bool, optional
+        Run the simulation and its sensitivities as compiled C (cached on disk by a hash of the
+        model, built once per model and number of fitted directions; results agree with the
+        interpreted functions to rounding).  Default: compile when a C compiler is available, the
+        inputs are piecewise linear (steps, staircases, square waves as sampled) and the fit is
+        large; otherwise run CasADi's interpreted functions.
+
+    Returns
+    -------
+    IdentificationResult
+
+    Raises
+    ------
+    ParameterError, InputDataError
+        Naming an unknown parameter, output or state, bad bounds, or a recording without a needed signal.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from systems.examples import rc_circuit
+    >>> from phs.workflows.recording import Recording
+    >>> truth = rc_circuit().with_params({"R.R": 2e3})
+    >>> t = np.linspace(0, 0.01, 201)
+    >>> u = np.where(t > 0.002, 1.0, 0.0)
+    >>> y = simulate(truth, t, u={"U": u})["v_C"]
+    >>> fit = identify(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"])
+    >>> round(fit.values["R.R"])
+    2000
+    """
+    wall = _time.perf_counter()
+    free = list(free)
+    if not free and not estimate_x0:
+        raise ParameterError("identify: give at least one free parameter (or states in estimate_x0)")
+    for k in free:
+        system.param(k)  # raises ParameterError naming it
+    code = system  # its generated functions serve every parameter value (they take p as an input)
+    if initial:
+        system = system.with_params(initial)
+    _, outs = recording.check_for(system, outputs)
+    for name in estimate_x0:
+        if name not in system.state_names:
+            raise InputDataError(f"estimate_x0: system {system.name!r} has no state {name!r}")
+    d = np.diff(recording.t)
+    if (d.max() - d.min()) > 1e-6 * d.mean():
+        raise InputDataError(f"{recording.source}: identification needs uniform sampling (use resample=)")
+    log_scaled = _log_scaled(system, free, log_scale)
+    w = _channel_weights(recording, outs, weights)
+    sim = Simulator(code, rtol=rtol, atol=atol)
+    x0v = sim.initial_state(x0)
+    p_start = system.param_vector()
+    try:
+        prob = _Problem(code, recording, free, log_scaled, outs, w, x0v, list(estimate_x0), rtol, atol,
+                        shooting=shooting, compile=compile, params=p_start)
+    except SimulationError:
+        if compile is not None:  # asked for explicitly: say why it failed
+            raise
+        # compiling is only a speed-up: without it the same fit runs interpreted
+        prob = _Problem(code, recording, free, log_scaled, outs, w, x0v, list(estimate_x0), rtol, atol,
+                        shooting=shooting, compile=False, params=p_start)
+    scale = sim.scale
+    lo, hi = _bounds(system, free, log_scaled, prob.nominal, bounds, estimate_x0, scale)
+    z0 = [0.0 if k in log_scaled else 1.0 for k in free]
+    z0 += [x0v[system.state_names.index(n)] / scale[system.state_names.index(n)] for n in estimate_x0]
+    if len(prob.window_starts):
+        # window states start on the trajectory of the initial parameters
+        u_sig = {n: Sampled(tuple(recording.t), tuple(recording[n])) for n in system.input_names}
+        xs = simulate(system, recording.t, u=u_sig, x0=x0v).x[prob.window_starts] / scale
+        z0 += list(xs.reshape(-1))  # column-major vec of (nx, K-1): window by window
+        lo += [-np.inf] * xs.size  # declared ranges guide checks and sampling; they do not bound trajectories
+        hi += [np.inf] * xs.size
+    z0 = np.clip(np.array(z0), np.array(lo) + 1e-12, np.array(hi) - 1e-12)
+    it = [0]
+    last = {}
+
+    def fun(z):
+        """Residual only: sensitivities are computed by ``jac`` for accepted points."""
+        try:
+            r = np.asarray(prob.res(z)).reshape(-1)
+        except RuntimeError:  # the simulation failed at this trial point: a large residual rejects it
+            r_prev = last.get("r")
+            return np.full(prob.n_rows, 1e6) if r_prev is None else 10 * np.abs(r_prev) + 1e3
+        last.update(r=r)
+        if progress:
+            it[0] += 1
+            print(f"  identify {system.name}: evaluation {it[0]}, cost {0.5 * r @ r:.6g}", file=sys.stderr, flush=True)
+        return r
+
+    def jac(z):
+        try:
+            return np.asarray(prob.jac(z)[1])
+        except RuntimeError as exc:
+            raise PHSError(f"identify {system.name!r}: the sensitivity simulation failed: {str(exc).splitlines()[-1]}") from None
+
+    # multiple shooting: continuation on the defect weight, from loose (windows fit the data
+    # almost freely) to tight (one continuous trajectory)
+    stages = [1.0, 10.0, 100.0, 1e3] if len(prob.window_starts) else [None]
+    z, nfev = z0, 0
+    for wd in stages:
+        if wd is not None:
+            prob.defect_weight = wd
+            last.clear()
+        sol = scipy.optimize.least_squares(fun, z, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                                           ftol=ftol, xtol=1e-10, gtol=1e-10, max_nfev=max_iter)
+        z, nfev = sol.x, nfev + sol.nfev
+    r, J = prob.jac(z)
+    r = np.asarray(r).reshape(-1)[: prob.n_outputs_residual]
+    J = np.asarray(J)[: prob.n_outputs_residual]
+    values = prob.values(z, log_scaled, free)
+    std, ci, corr, flagged = _uncertainty(r, J, values, prob.nominal, free, log_scaled)
+    x0_fit = x0v.copy()
+    for j, name in enumerate(estimate_x0):
+        i = system.state_names.index(name)
+        x0_fit[i] = z[len(free) + j] * scale[i]
+    if len(prob.window_starts):  # the fitted model as one trajectory (the windows joined up to the defects)
+        sims = _simulate_outputs(system, recording, outs, x0_fit, params=values)
+    else:  # the trajectory of the final residual
+        sims = dict(zip(outs, prob.outputs(z), strict=True))
+    fits = {ch: nrmse_fit(recording[ch], sims[ch]) for ch in outs}
+    result = IdentificationResult(
+        system=system, free=free, values=values, initial={k: float(system.param(k).value) for k in free},
+        std_errors=std, intervals=ci, correlation=corr, flagged_pairs=flagged, fit_percent=fits,
+        validation_fit_percent={}, residuals={ch: recording[ch] - sims[ch] for ch in outs}, cost=float(sol.cost),
+        iterations=int(nfev), seconds=_time.perf_counter() - wall, x0=x0_fit, outputs=outs, weights=w,
+        log_scaled=log_scaled, message=str(sol.message), _recording=recording, compiled=prob.compiled,
+    )
+    if validation is not None:
+        result.validate(validation)
+    return result
