@@ -12,6 +12,8 @@ import os
 import numpy as np
 
 from phs.io import write_atomic
+from phs.workflows.diagnose.mismatch import _features
+from phs.workflows.diagnose.ranking import _delta_bic, _gain
 
 # which located findings speak for which effect (used to say where an effect showed)
 _EVIDENCE = {
@@ -48,8 +50,6 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
     if not accepted:
         if rival is None:
             return "No candidate could be fitted; the nominal model stands."
-        from phs.workflows.diagnose import _delta_bic, _gain
-
         g = _gain(nominal, rival)
         white = [f for f in findings if f.kind == "whiteness"]
         tail = (" The residual " + ("looks white" if all(f.details.get("p_value", 0) > 0.01 for f in white) else "keeps some structure")
@@ -73,8 +73,6 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
                    + f" Fit: {_fits(nominal if k == 0 else accepted[k - 1], h, outs)}."
                    + "".join(f" {n}" for n in h.notes))
     if rival is not None:
-        from phs.workflows.diagnose import _gain
-
         g = _gain(nominal, rival)
         out.append(f"Next best explanation: {rival.augmentation.effect} at {rival.augmentation.attached_to} "
                    f"(validation residual {100 * g:+.1f} %).")
@@ -140,7 +138,6 @@ def figure_hypotheses(d) -> bytes:
 
 
 def figure_locate(d) -> bytes | None:
-    from phs.workflows.diagnose import _features
     from phs.workflows.diagnose import locate as loc
 
     if not hasattr(loc, "plot_findings"):

@@ -1,0 +1,108 @@
+"""Scoring, accepting and choosing hypotheses.
+
+Every fitted hypothesis is measured against the model it extends, scored on the same data: the relative
+decrease of its validation residual and its change of BIC.  The acceptance rule and the preference for
+the simplest sufficient explanation are stated in :mod:`phs.workflows.diagnose`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+MIN_BIC_GAIN = 10.0
+"""Training BIC decrease needed to accept a hypothesis ("very strong" evidence on the Kass-Raftery scale)."""
+MIN_VALIDATION_GAIN = 0.01
+"""Relative decrease of the validation residual needed to accept a hypothesis."""
+SUFFICIENT_MARGIN = 0.03
+"""Hypotheses within this relative validation-residual margin of the best count as equally good."""
+FRICTION_LIKE = 0.05
+"""A hysteresis loop whose saturated deflection ``F_h / (k_h (1 + eta))`` is below this share of the
+displacement's standard deviation is friction with a pre-sliding regime, not a loop of the material:
+when smooth Coulomb friction at the same place is accepted too, it is the simpler explanation."""
+
+
+def _gain(nominal, h) -> float:
+    """Relative decrease of the validation residual against the model it extends (scored on the same data)."""
+    ref = h.reference_rss if h.reference_rss is not None else nominal.validation_rss
+    if not math.isfinite(h.validation_rss) or ref <= 0:
+        return -math.inf
+    return float((ref - h.validation_rss) / ref)
+
+
+def _delta_bic(nominal, h) -> float:
+    ref = h.reference_bic if h.reference_bic is not None else nominal.bic
+    return float(h.bic - ref)
+
+
+def _accepted(nominal, h) -> bool:
+    return h.ok and h.stage == "full" and -_delta_bic(nominal, h) >= MIN_BIC_GAIN and _gain(nominal, h) >= MIN_VALIDATION_GAIN
+
+
+def _pick(nominal, hyps, data=None):
+    """Best accepted hypothesis, preferring fewer parameters among the equally good ones, and Coulomb
+    friction over a hysteresis element that only describes friction (see :data:`FRICTION_LIKE`)."""
+    acc = [h for h in hyps if _accepted(nominal, h)]
+    if not acc:
+        return None
+    best = min(h.validation_rss for h in acc)
+    good = [h for h in acc if h.validation_rss <= best * (1 + SUFFICIENT_MARGIN) + 1e-300]
+    pick = min(good, key=lambda h: (h.n_params, h.bic))
+    if data is not None and pick.augmentation.effect == "hysteresis":
+        share = presliding_share(nominal, pick, data)
+        friction = [h for h in acc if h.augmentation.effect == "coulomb_friction"
+                    and h.augmentation.attached_to == pick.augmentation.attached_to]
+        if share is not None and share < FRICTION_LIKE and friction:
+            f = friction[0]
+            f.notes.append(f"A hysteresis element at {pick.augmentation.attached_to} fits a little better (validation residual "
+                           f"{100 * _gain(nominal, pick):+.1f} % against {100 * _gain(nominal, f):+.1f} %), but its loop closes "
+                           f"within {100 * share:.2g} % of the motion's standard deviation: that is the pre-sliding regime of "
+                           f"friction, not a hysteresis of the material, and smooth Coulomb friction describes it with fewer parameters.")
+            return f
+    return pick
+
+
+def presliding_share(nominal, h, data) -> float | None:
+    """For a fitted ``hysteresis`` hypothesis: its saturated deflection ``F_h / (k_h (1 + eta))``
+    divided by the standard deviation of the displacement its momentum moves (along the nominal
+    fit: its velocity ∂H/∂p integrated); None for other effects or grouped attachments.
+    Small (≪ 1): the loop closes within a tiny part of the motion — pre-sliding friction; of order
+    one or more: the loop spans the motion — hysteresis of the material or the structure.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phs.workflows.diagnose import diagnose
+    >>> from systems.examples import rc_circuit
+    >>> from codegen import simulate
+    >>> from phs.workflows.recording import Recording
+    >>> t = np.linspace(0, 0.02, 401); u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
+    >>> y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+    >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"])
+    >>> presliding_share(d.nominal, d.accepted[0], d.data) is None   # an offset, not a hysteresis
+    True
+    """
+    from scipy.integrate import cumulative_trapezoid
+
+    from phs.workflows.diagnose.hypotheses import train_result
+
+    aug = h.augmentation
+    if aug.effect != "hysteresis" or aug.attached_to.startswith("*."):
+        return None
+    k, F, eta = (h.values.get(f"hysteresis.{n}") for n in ("k_h", "F_h", "eta"))
+    if k is None or F is None:
+        return None
+    eta = 0.0 if eta is None else eta
+    if 1 + eta <= 0 or k <= 0:
+        return math.inf
+    # the displacement the momentum moves: its velocity ∂H/∂p integrated along the nominal fit
+    s = nominal.system
+    res = train_result(nominal, data)
+    X = np.asarray(res.x)
+    i = s.state_names.index(aug.attached_to)
+    grad = s.with_params(nominal.values).lambdify(s.grad_H[i], with_u=False)
+    v = np.broadcast_to(np.asarray(grad(X.T), dtype=float).reshape(-1), (len(X),)) if len(X) else np.zeros(0)
+    disp = cumulative_trapezoid(v, np.asarray(res.t), initial=0.0)
+    stroke = float(np.std(disp))
+    return float(F / (k * (1 + eta)) / stroke) if stroke > 0 else math.inf

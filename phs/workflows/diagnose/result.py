@@ -1,0 +1,123 @@
+"""The outcome of a diagnosis: :class:`Diagnosis`, with its verdict, its JSON and its report."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from phs.workflows.diagnose import report
+from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN, _delta_bic, _gain
+
+
+@dataclass
+class Diagnosis:
+    """Outcome of :func:`~phs.workflows.diagnose.diagnose`: the nominal fit, the located mismatch, the ranked hypotheses,
+    the accepted effects and the final model.  ``to_dict()`` is the documented JSON."""
+
+    system: object
+    outputs: list
+    nominal: object
+    findings: list
+    hypotheses: list
+    accepted: list
+    final: object
+    verdict: dict
+    noise: dict
+    seconds: float
+    rounds: list = field(default_factory=list)
+    data: object = None
+    final_findings: list = field(default_factory=list)
+
+    @property
+    def effect(self) -> str:
+        """The main effect's name, or ``"none"``."""
+        return self.verdict["effect"]
+
+    @property
+    def final_system(self):
+        """The final (augmented and fitted) model."""
+        return self.final.system
+
+    def structure_checks(self) -> dict:
+        """Structural checks of the final model (J skew, R PSD, H bounded below, units)."""
+        rep = self.final.system.check()
+        return {"ok": bool(rep.ok), "report": str(rep)}
+
+    def to_dict(self) -> dict:
+        def hyp(h, rank):
+            aug = h.augmentation
+            return {
+                "rank": rank, "effect": aug.effect, "component": aug.component, "attached_to": aug.attached_to,
+                "parameters": {**{k: h.values.get(k) for k in aug.free}, **h.element_values},
+                "fit_percent": h.fit_percent, "validation_fit_percent": h.validation_fit_percent,
+                "criterion": {"bic": h.bic, "delta_bic": _delta_bic(self.nominal, h) if math.isfinite(h.bic) else None, "stage": h.stage,
+                              "validation_residual": h.validation_rss,
+                              "validation_gain": _gain(self.nominal, h)},
+                "n_params": h.n_params, "accepted": any(h is a for a in self.accepted), "seconds": h.seconds,
+                **({"error": h.error} if h.error else {}),
+            }
+
+        return {
+            "system": self.system.name, "model_hash": self.system.model_hash(), "outputs": self.outputs,
+            "baseline": {"fit_percent": self.nominal.fit_percent, "validation_fit_percent": self.nominal.validation_fit_percent,
+                         "parameters": self.nominal.values, "bic": self.nominal.bic},
+            "noise": self.noise,
+            "mismatch": [f.to_dict() for f in self.findings],
+            "hypotheses": [hyp(h, i + 1) for i, h in enumerate(self.hypotheses)],
+            "verdict": self.verdict,
+            "final": {"fit_percent": self.final.fit_percent, "validation_fit_percent": self.final.validation_fit_percent,
+                      "parameters": {**self.final.values, **self.final.element_values},
+                      "passive": self.structure_checks()["ok"]},
+            "seconds": self.seconds,
+        }
+
+    def summary(self) -> str:
+        v = self.verdict
+        lines = [f"Diagnosis of {self.system.name!r} ({self.seconds:.1f} s): verdict {v['effect']}"
+                 + (f" (effects: {', '.join(v['effects'])})" if len(v["effects"]) > 1 else "")
+                 + f", confidence {v['confidence']:.2f}", "  " + v["explanation"]]
+        lines.append("  fit % (training / validation):")
+        for ch in self.outputs:
+            lines.append(f"    {ch}: nominal {self.nominal.fit_percent[ch]:.2f} / {self.nominal.validation_fit_percent[ch]:.2f}"
+                         f"  ->  final {self.final.fit_percent[ch]:.2f} / {self.final.validation_fit_percent[ch]:.2f}")
+        lines.append("  located mismatch:")
+        for f in self.findings[:8]:
+            lines.append(f"    [{f.kind}] {f.channel}: {f.where} (strength {f.strength:.3g})")
+        lines.append("  hypotheses (best first):")
+        for h in self.hypotheses[:8]:
+            if h.error:
+                lines.append(f"    {h.label:<32} failed: {h.error}")
+                continue
+            vf = ", ".join(f"{k} {x:.2f}" for k, x in h.validation_fit_percent.items())
+            lines.append(f"    {h.label:<32} validation fit {vf}; ΔBIC {_delta_bic(self.nominal, h):+.1f}; "
+                         f"gain {100 * _gain(self.nominal, h):+.1f} %" + (" (screening)" if h.stage != "full" else "")
+                         + ("  accepted" if any(h is a for a in self.accepted) else ""))
+        return "\n".join(lines)
+
+    __str__ = summary
+
+    def write_report(self, directory) -> None:
+        """HTML report with figures, and ``diagnosis.json``, into ``directory`` (written atomically)."""
+        report.write_report(self, directory)
+
+
+def _verdict(nominal, accepted, hyps, findings, outs) -> dict:
+    ok = [h for h in hyps if h.ok]
+    if not accepted:
+        best = ok[0] if ok else None
+        g = _gain(nominal, best) if best else 0.0
+        conf = float(np.clip(1.0 - max(g, 0.0) / (2 * MIN_VALIDATION_GAIN), 0.0, 1.0)) if best else 0.5
+        conf = max(conf, 0.5) if (best is None or -_delta_bic(nominal, best) < MIN_BIC_GAIN) else conf
+        return {"effect": "none", "effects": [], "explanation": report.explanation(nominal, [], findings, best, outs),
+                "confidence": round(conf, 3)}
+    main = accepted[0]
+    rivals = [h for h in ok if h.augmentation.effect != main.augmentation.effect]
+    g_main = _gain(nominal, main)
+    g_rival = max([_gain(nominal, h) for h in rivals] + [0.0])
+    sep = (g_main - g_rival) / g_main if g_main > 0 else 0.0
+    conf = float(np.clip(0.5 + 0.5 * sep, 0.0, 1.0))
+    return {"effect": main.augmentation.effect, "effects": [a.augmentation.effect for a in accepted],
+            "explanation": report.explanation(nominal, accepted, findings, rivals[0] if rivals else None, outs),
+            "confidence": round(conf, 3)}

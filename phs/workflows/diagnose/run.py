@@ -1,0 +1,176 @@
+"""The diagnosis itself: :func:`diagnose` fits the nominal model, locates the mismatch, fits the candidates
+round after round and returns the :class:`~phs.workflows.diagnose.result.Diagnosis`."""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from phs.errors import InputDataError, ParameterError
+from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
+from phs.workflows.diagnose.ranking import _gain, _pick
+from phs.workflows.diagnose.result import Diagnosis, _verdict
+from phs.workflows.diagnose.screening import _refit_friction_rival, _screen_and_refit
+
+SPLIT = 0.7
+"""Share of a single recording used for training when no validation recording is given."""
+
+
+def diagnose(system, recording, *, validation=None, free=None, outputs=None, candidates=None, x0=None, bounds=None,
+             log_scale=None, max_effects: int = 2, n_jobs: int | None = None, progress: bool = False, rtol: float = 1e-7,
+             refit_top: int = 3, estimate_x0=()) -> Diagnosis:
+    """Find where ``system`` and ``recording`` disagree, which physics is missing, and the fixed model.
+
+    Parameters
+    ----------
+    system : PHSystem
+        The nominal model (built from components by the user).
+    recording : Recording
+        Training recording (uniformly sampled) with every input and the fitted outputs.
+    validation : Recording, optional
+        Validation recording; default: the last 30 % of ``recording`` (fitted on the first 70 %).
+    free : sequence of str, optional
+        Nominal parameters refitted with every hypothesis (default: every parameter with a declared
+        range, at most 8).
+    outputs : sequence of str, optional
+        Channels to fit (default: every measured output in the recording).
+    candidates : sequence of Candidate, optional
+        Default :data:`components.candidates.LIBRARY`; add your own :class:`components.candidates.Candidate`.
+    x0 : dict, optional
+        Initial state of the nominal model.
+    estimate_x0 : sequence of str
+        States whose initial values are estimated with the nominal fit (a recording that does not
+        start at rest); every hypothesis then starts from them.
+    bounds, log_scale : optional
+        Passed to :func:`phs.identify` for the nominal parameters.
+    max_effects : int
+        Most effects accepted one after the other.
+    n_jobs : int, optional
+        Processes fitting hypotheses in parallel (default: the number of CPUs, at most 4).
+    refit_top : int
+        Every hypothesis is first screened by a loose fit (at most 10 evaluations); the ``refit_top``
+        most promising are then refitted to convergence (0: every hypothesis is fitted to convergence).
+    progress : bool
+        Print one line per fitted hypothesis on stderr.
+
+    Returns
+    -------
+    Diagnosis
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from systems.examples import rc_circuit
+    >>> from codegen import simulate
+    >>> from phs.workflows.recording import Recording
+    >>> t = np.linspace(0, 0.02, 401); u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
+    >>> y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05   # a sensor offset
+    >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"])
+    >>> d.effect
+    'offset'
+    """
+    from components.candidates import LIBRARY, Scales
+    from phs.workflows.diagnose.hypotheses import Data, fit_nominal, train_result
+
+    wall = time.perf_counter()
+    if n_jobs is None:
+        import os
+
+        n_jobs = max(1, min(4, os.cpu_count() or 1))
+    _, outs = recording.check_for(system, outputs)
+    if free is None:
+        free = [p.name for p in system.params if p.range is not None and p.value not in (None, 0)][:8]
+        if not free:
+            raise ParameterError(f"diagnose: system {system.name!r} has no parameter with a declared range; give free=[...]")
+    free = list(free)
+    for k in free:
+        system.param(k)
+    if max_effects < 0:
+        raise ParameterError(f"diagnose: max_effects must be >= 0, got {max_effects}")
+    if validation is None:
+        t = recording.t
+        at = t[0] + SPLIT * (t[-1] - t[0])
+        if len(recording) < 40:
+            raise InputDataError(f"{recording.source}: too short to split into training and validation ({len(recording)} samples)")
+        train = recording.window(t[0], at)
+        data = Data(train, recording, t > at, t <= at, outs, free, dict(bounds or {}), list(log_scale or []), x0, rtol,
+                    tuple(estimate_x0))
+    else:
+        validation.check_for(system, outs)
+        data = Data(recording, validation, np.ones(len(validation), bool), None, outs, free, dict(bounds or {}),
+                    list(log_scale or []), x0, rtol, tuple(estimate_x0))
+    noise = {ch: noise_level(recording[ch]) for ch in outs}
+    cands = list(LIBRARY if candidates is None else candidates)
+
+    if progress:
+        print(f"diagnose {system.name}: fitting the nominal model ({', '.join(free)})", file=sys.stderr, flush=True)
+    nominal = fit_nominal(system, data)
+    findings = _locate(nominal, system, data, noise)
+    current, accepted, all_hyps, rounds = nominal, [], [], []
+    pool = cands
+    for round_ in range(max_effects):
+        res = train_result(current, data)
+        X = np.asarray(res.x)
+        names = current.system.input_names
+        U = np.column_stack([np.asarray(res[n]) for n in names]) if names else np.zeros((len(X), 0))
+        scales = Scales.of(current.system.with_params(current.values), res.t, X, U,
+                           {ch: data.recording[ch] for ch in outs})
+        augs = []
+        for c in pool:
+            for w in c.attach_points(current.system):
+                if c.kind == "input" and np.ptp(np.asarray(data.recording[w], float)) == 0:
+                    continue  # a constant input: saturation, slew rate or delay change nothing
+                if any(a.augmentation.effect == c.effect and a.augmentation.attached_to == w for a in accepted):
+                    continue
+                try:
+                    aug = c.augment(current.system.with_params(current.values), w, scales)
+                    augs.append(aug if aug.summary else replace(aug, summary=c.summary))
+                except Exception as exc:  # a user candidate that cannot attach here is skipped, and said so
+                    if progress:
+                        print(f"  {c.effect}@{w}: cannot attach ({exc})", file=sys.stderr)
+        if progress:
+            print(f"diagnose {system.name}: round {round_ + 1}, {len(augs)} hypotheses", file=sys.stderr, flush=True)
+        data_r = data if round_ == 0 or accepted[-1].augmentation.element is None else _through_element(data, accepted[-1])
+        if round_ > 0:
+            data_r = replace(data_r, free=list(dict.fromkeys(list(data_r.free) + [k for a in accepted for k in a.augmentation.free])))
+        hyps = _screen_and_refit(current, augs, data_r, n_jobs, progress, f"round {round_ + 1}", refit_top)
+        hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
+        rounds.append(hyps)
+        if round_ == 0:
+            all_hyps = hyps
+        pick = _pick(current, hyps, data_r)
+        if _refit_friction_rival(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
+            hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
+            pick = _pick(current, hyps, data_r)
+        if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
+            hyps.remove(pick)
+            hyps.insert(0, pick)
+        if pick is None:
+            break
+        accepted.append(pick)
+        current = pick
+        data = data_r
+        # a second effect only when the first leaves a structured residual well above the noise
+        if not _structured(current, noise, outs):
+            break
+        # second round: the most promising other effects of round 1
+        promising = [h.augmentation.effect for h in all_hyps if h.ok and h is not pick and _gain(nominal, h) > 0]
+        pool = [c for c in cands if c.effect in promising[:6] and c.effect != pick.augmentation.effect]
+        if not pool:
+            break
+    final_findings = _locate(current, current.system, data, noise) if accepted else findings
+    verdict = _verdict(nominal, accepted, all_hyps, findings, outs)
+    return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, current, verdict, noise,
+                     time.perf_counter() - wall, rounds, data, final_findings)
+
+
+def _through_element(data, h):
+    from phs.workflows.diagnose.hypotheses import _transformed
+
+    el, where = h.augmentation.element, h.augmentation.attached_to
+    theta = [h.element_values[f"{el.effect}.{s}"] for s in [p[0] for p in el.parameters(data.recording.t, data.recording[where])]]
+    return replace(data, recording=_transformed(data.recording, el, where, theta),
+                   validation=_transformed(data.validation, el, where, theta))
