@@ -22,10 +22,6 @@ from collections.abc import Sequence
 
 from phs.errors import PHSError
 
-# shared options and checks, also imported from here by the diagnose subcommand
-from phs.workflows.cli_options import _add_model_options, _check_writable, _name_list, _positive  # noqa: F401
-from phs.workflows.cli_recordings import add_recording_options, model_and_recordings  # noqa: F401
-
 EXIT_ERROR = 2
 
 # Subcommands in the order of ``phs --help``, each defined in its workflow's own module with

@@ -19,7 +19,8 @@ def add_subcommand(sub) -> None:
     >>> args.free, args.max_effects
     ('R.R', 2)
     """
-    from phs.workflows.cli import _add_model_options, _positive, add_recording_options
+    from phs.workflows.cli_options import _add_model_options, _positive
+    from phs.workflows.cli_recordings import add_recording_options
 
     p = sub.add_parser(
         "diagnose", help="find where a model misses a recording, which physics is missing, and the fixed model",
@@ -44,7 +45,8 @@ def add_subcommand(sub) -> None:
 def run_diagnose(args: argparse.Namespace) -> int:
     """Run ``phs diagnose``; every output is prepared before the first file is written."""
     from components.candidates import LIBRARY
-    from phs.workflows.cli import _check_writable, _name_list, model_and_recordings
+    from phs.workflows.cli_options import _check_writable, _name_list
+    from phs.workflows.cli_recordings import model_and_recordings
 
     _check_writable(args.json)
     if args.report is not None:
