@@ -210,7 +210,7 @@ class Simulator:
         return F, layout
 
     # -- running ------------------------------------------------------------------------------
-    def run(self, t, u=None, x0=None, params=None) -> SimulationResult:
+    def run(self, t, u=None, x0=None, params=None, *, signs: bool = True) -> SimulationResult:
         """Integrate on the grid ``t`` and return a :class:`SimulationResult`.
 
         Parameters
@@ -226,7 +226,11 @@ class Simulator:
         x0 : dict or array, optional
             Initial state (default: zero, clipped into each state's range).
         params : dict, optional
-            Parameter overrides by name.
+            Parameter overrides by name, checked like every value from outside
+            (:meth:`phs.PHSystem.param_vector`: a value of the wrong sign is refused).
+        signs : bool, optional
+            ``False`` lets an override of the wrong sign through, for analyses that report what
+            it does (the passivity certificate's what-if along a trajectory); never for a plain run.
 
         Raises
         ------
@@ -238,7 +242,7 @@ class Simulator:
         s = self.system
         wall = _time.perf_counter()
         t = time_grid(t)
-        p = s.param_vector(params)
+        p = s.param_vector(params, signs=signs)
         x = self.initial_state(x0)
         self._check_domain(x[None, :], t[:1], p, np.zeros((1, len(s.inputs))))
         sigs = input_signals(s, u, t)

@@ -81,7 +81,8 @@ def _vector(system, spec, names, what, default) -> np.ndarray:
 
 
 def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float = 1e-10,
-                max_nfev: int = 500, h0: float = 1e-6, stable: bool = True, _growth: float = 10.0) -> EquilibriumResult:
+                max_nfev: int = 500, h0: float = 1e-6, stable: bool = True, signs: bool = True,
+                _growth: float = 10.0) -> EquilibriumResult:
     """Equilibrium of ``system`` under the constant input ``u`` on the leaf through ``x0``.
 
     Parameters
@@ -93,7 +94,7 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
         Starting point; the conserved quantities of J keep their values at
         ``x0`` (default: zero clipped into the state ranges).
     params : dict, optional
-        Parameter overrides.
+        Parameter overrides (a value of the wrong sign is refused, see :meth:`PHSystem.param_vector`).
     guess : dict, optional
         Starting values of some states (moved onto the leaf through ``x0`` first).
     max_nfev : int
@@ -104,6 +105,9 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
         Prefer a stable equilibrium: when the one found is unstable (an eigenvalue of the
         linearisation on the leaf with positive real part), retry following the dynamics more
         closely; ``info["stable"]`` reports the outcome.
+    signs : bool
+        ``False`` accepts a parameter override of the wrong sign (only for analyses that report
+        what it does, such as the passivity certificate's what-if).
     tol : float
         Required residual ``max_i |x'_i| / s_i`` relative to the largest scaled rate at ``x0``
         (``s_i`` are the states' typical magnitudes).
@@ -129,7 +133,7 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
     base = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in system.states])
     xs = _vector(system, x0, names, "state x0", base)
     uv = _vector(system, u, system.input_names, "input u", np.zeros(len(system.inputs)))
-    p = system.param_vector(params)
+    p = system.param_vector(params, signs=signs)
     fdyn = system.lambdify(system.dynamics)
     import sympy as sp
 
@@ -291,7 +295,7 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
     if stable and not is_stable and growth > 2.0:
         try:
             return equilibrium(system, u=u, x0=x0, params=params, guess=guess, tol=tol, max_nfev=4 * max_nfev, h0=h0,
-                               stable=True, _growth=1.3)
+                               stable=True, signs=signs, _growth=1.3)
         except EquilibriumError:
             pass
     return EquilibriumResult(system.name, tuple(names), x, uv, res, k, tuple(names[i] for i in dep),

@@ -43,6 +43,7 @@ import sympy as sp
 from codegen._named import find_named
 from codegen.idapbc.closed_loop import simulate_closed_loop
 from codegen.idapbc.linear import closed_loop_modes, leaf_hessian
+from phs._json import jsonable as _jsonable
 from phs.errors import PHSError
 
 
@@ -103,24 +104,6 @@ class CertificateReport:
     def to_dict(self) -> dict:
         return {"system": self.controller.system.name, "passed": self.passed,
                 "certificates": {c.name: c.to_dict() for c in self.items}, "info": _jsonable(self.info)}
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, complex):
-        return [_jsonable(obj.real), _jsonable(obj.imag)]
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
 
 
 # -- sampling on the leaf --------------------------------------------------------------------------

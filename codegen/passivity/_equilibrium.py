@@ -35,7 +35,7 @@ def _equilibrium_point(system, model: _Model, x_eq, u_eq, p, params, x0):
     if isinstance(x_eq, EquilibriumResult):
         return np.asarray(x_eq.x, dtype=float), np.asarray(x_eq.u, dtype=float), "equilibrium given as a solver result"
     if x_eq is None:
-        eq = equilibrium(system, u=dict(zip(inames, uvec)), x0=x0, params=params)
+        eq = equilibrium(system, u=dict(zip(inames, uvec)), x0=x0, params=params, signs=False)  # the what-if
         return eq.x, uvec, f"equilibrium solved for u = {_fmt_point(dict(zip(inames, uvec))) or 'none'}"
     x = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in system.states])
     if isinstance(x_eq, dict):

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from phs._json import jsonable as _jsonable
 
 _VERDICTS = ("pass", "fail", "undecided")
 
@@ -68,24 +69,6 @@ class PassivityTest:
         if self.worst:
             out += "\n              at " + _fmt_point(self.worst)
         return out + f"\n              ({self.method})"
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, complex):
-        return [obj.real, obj.imag]
-    return obj
 
 
 def _fmt_point(point: dict) -> str:

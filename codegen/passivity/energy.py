@@ -59,14 +59,15 @@ def dissipation_inequality(source, t=None, *, u=None, x0=None, params=None, rtol
     True
     """
     from codegen.results import SimulationResult
-    from codegen.simulator import simulate
+    from codegen.simulator import simulator
 
     if isinstance(source, SimulationResult):
         res = source
     else:
         if t is None:
             raise InputDataError("dissipation_inequality: give the time grid t to simulate the system on")
-        res = simulate(source, t, u=u, x0=x0, params=params, rtol=rtol)
+        # the certificate's what-if: an override of the wrong sign is simulated to show what it does
+        res = simulator(source, rtol=rtol).run(t, u=u, x0=x0, params=params, signs=False)
     s = res.system
     q = res.quadratures or {}
     labels = [label for label, _ in s.dissipators]

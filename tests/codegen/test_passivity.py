@@ -87,7 +87,7 @@ def rc_leak(R=100.0, R2=900.0, C=1e-4):
 def _eig_min_at(system, point, params=None):
     """Independent check: numpy's smallest eigenvalue of the sympy-lambdified [[R, P], [P^T, S]] at a point."""
     x = [point[n] for n in system.state_names]
-    p = system.param_vector(params)
+    p = system.param_vector(params, signs=False)  # the what-if values the certificate was given
     D = np.asarray(system.lambdify(system.dissipation_matrix)(x, [0.0] * len(system.inputs), p), dtype=float)
     return float(np.linalg.eigvalsh(D)[0])
 

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from phs._json import jsonable as _json
 from phs.errors import InputDataError
 
 KINDS = ("time_window", "feature", "spectrum", "harmonic", "input_lag", "amplitude_scaling", "rate_scaling",
@@ -66,17 +64,3 @@ class Finding:
         """
         return {"kind": self.kind, "channel": self.channel, "where": self.where, "strength": _json(self.strength),
                 "meaning": self.meaning, "details": _json(self.details)}
-
-
-def _json(obj):
-    if isinstance(obj, dict):
-        return {str(k): _json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [_json(v) for v in obj]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    return obj if obj is None or isinstance(obj, str) else str(obj)
