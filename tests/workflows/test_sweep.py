@@ -503,6 +503,52 @@ def test_cli_sweep_against_a_recording_scores_fit_percent(tmp_path, capsys):
     assert "--data gives the time grid" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("dt", ["1e-5", "1e-4"])
+def test_cli_sweep_of_a_square_wave_with_edges_on_the_grid(tmp_path, capsys, dt):
+    """200 Hz on a grid of 10 or 100 us: every edge lands on a grid point, up to rounding."""
+    from codegen import simulate
+    from phs.signals import square
+    from systems.examples import rc_circuit
+
+    out = tmp_path / "sw.csv"
+    assert main(["sweep", "systems.examples:rc_circuit", "--range", "R.R=500:2000:4", "--input", "square(1.0, 200)",
+                 "--metric", "peak:v_C", "--t-end", "0.01", "--dt", dt, "--out", str(out), "--quiet"]) == 0
+    res = StudyResult.read(out)
+    assert res.ok.all(), res.failed
+    t = np.arange(0.0, 0.01 + float(dt) / 2, float(dt))
+    for r, highest in zip(res["R.R"], res["peak_v_C"]):
+        assert highest == simulate(rc_circuit(), t, u={"U": square(1.0, 200.0)}, params={"R.R": r})["v_C"].max()
+
+
+MAX_FAILED_CASES = [  # (extra options, exit code, failed runs): U = 1/(V - 1000 t) is infinite at t = 0 for V = 0
+    (["--range", "V=0,100,200"], 0, 1),                              # a third failed: below the default half
+    (["--range", "V=0,100,200", "--max-failed", "0.2"], 2, 1),       # more than the share allowed
+    (["--range", "V=0,0,100", "--max-failed", "0.5"], 2, 2),         # two thirds
+    (["--range", "V=0,-0.0", "--max-failed", "1"], 2, 2),            # every run failed: always an error
+]
+
+
+@pytest.mark.parametrize(("extra", "code", "n_failed"), MAX_FAILED_CASES)
+def test_cli_sweep_fails_loudly_when_too_many_runs_failed(tmp_path, capsys, extra, code, n_failed):
+    out = tmp_path / "f.csv"
+    assert main(["sweep", "systems.examples:rc_circuit", "--input", "U=1/(V-1000*t)", "--metric", "peak:v_C",
+                 "--t-end", "0.01", "--dt", "1e-3", "--out", str(out), "--quiet", *extra]) == code
+    res = StudyResult.read(out)  # the results are written either way
+    assert len(res.failed) == n_failed
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("phs: error")]
+    if code == 0:
+        assert not err
+        return
+    assert len(err) == 1 and "first failure, run 0: simulation of 'rc': the integrator failed" in err[0]
+    assert ("every run failed" if n_failed == len(res) else f"{n_failed} of {len(res)} runs failed") in err[0]
+
+
+def test_max_failed_must_be_a_share(tmp_path, capsys):
+    assert main(["sweep", MSD, "--range", "k.K=1:2:2", "--metric", "peak:position", "--t-end", "1", "--dt", "0.1",
+                 "--out", str(tmp_path / "s.csv"), "--max-failed", "1.5"]) == 2
+    assert "--max-failed must be a share from 0 to 1" in capsys.readouterr().err
+
+
 def test_progress_bar_on_stderr(rc, capsys):
     study = Study(rc, [0.0, 1e-3], u={"U": 1.0}, grid={"R.R": [1e3, 2e3, 3e3]}, metrics=["final:v_C"])
     sweep(study, progress=True)
