@@ -89,7 +89,8 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
     progress : bool
         Show a progress bar (on stderr).
     flush_seconds : float
-        How often the results file is rewritten from the finished runs (parts are written at once).
+        How often the results file is rewritten from the finished runs (parts are written at once;
+        0 rewrites it after every chunk).
 
     Returns
     -------
