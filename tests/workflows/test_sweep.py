@@ -642,3 +642,60 @@ def test_cli_metric_specifications():
     assert metric("rise_time:x:0.1:").name == "rise_time_x"
     with pytest.raises(InputDataError, match="a fit needs a recording"):
         metric("fit:tip")
+
+
+# -- plots are written atomically, with units on their axes ------------------------------------------------
+def _study_and_fit(rc):
+    import phs
+    from codegen import simulate
+    from phs.workflows.recording import Recording
+
+    study = sweep(Study(rc, np.linspace(0.0, 1e-3, 11), u={"U": 1.0}, grid={"R.R": [1e3, 2e3]},
+                        metrics=["final:v_C", "energy"]), progress=False)
+    t = np.linspace(0.0, 5e-3, 101)
+    u = np.where(t < 2e-3, 1.0, 0.0)
+    rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc.with_params({"R.R": 1500.0}), t, u={"U": u})["v_C"]})
+    return study, phs.identify(rc, rec, free=["R.R"])
+
+
+def test_plots_label_their_axes_with_units(rc, tmp_path):
+    study, fit = _study_and_fit(rc)
+    fig = study.plot(tmp_path / "study.png")
+    labels = {a.get_xlabel() for a in fig.axes} | {a.get_ylabel() for a in fig.axes}
+    assert {"R.R [Ohm]", "final_v_C [V]", "energy [J]"} <= labels
+    assert fit.plot(tmp_path / "fit.png").axes[-1].get_xlabel() == "t [s]"
+    assert fit.plot().axes[0].get_ylabel() == "v_C [V]"
+    out = tmp_path / "r.parquet"
+    sweep(Study(rc, [0.0, 1e-3], u={"U": 1.0}, grid={"R.R": [1e3]}, metrics=["peak:v_C"]), out, progress=False)
+    assert StudyResult.read(out).units == {"R.R": "Ohm", "peak_v_C": "V"}  # carried by the Parquet file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.png", "r.parquet", "study.png"]
+
+
+@pytest.mark.parametrize("which", ["study", "fit"])
+def test_a_plot_failing_midway_leaves_no_file_and_an_existing_one_untouched(rc, tmp_path, monkeypatch, which):
+    from matplotlib.figure import Figure
+
+    study, fit = _study_and_fit(rc)
+    plot = study.plot if which == "study" else fit.plot
+    real = Figure.savefig
+
+    def half_then_fail(self, fname, *args, **kwargs):
+        real(self, fname, *args, **kwargs)  # the image is rendered (into memory), then the disk is full
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", half_then_fail)
+    new = tmp_path / "new.png"
+    with pytest.raises(OSError):
+        plot(new)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no partial file, no temporary file
+    old = tmp_path / "old.png"
+    old.write_bytes(b"the previous figure")
+    with pytest.raises(OSError):
+        plot(old)
+    assert old.read_bytes() == b"the previous figure" and sorted(p.name for p in tmp_path.iterdir()) == ["old.png"]
+    monkeypatch.undo()
+    plot(old)
+    assert old.read_bytes()[:4] == b"\x89PNG"
+    with pytest.raises(InputDataError, match="unknown image format 'xyz'"):
+        plot(tmp_path / "f.xyz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.png"]

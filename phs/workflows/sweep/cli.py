@@ -323,12 +323,7 @@ def run_sweep(args) -> int:
                    processes=args.processes, scheduler=args.scheduler, chunk_size=args.chunk, progress=not args.quiet)
     print(result.summary())
     if args.plot is not None:
-        import io
-
-        fig = result.plot()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=100)
-        write_atomic(args.plot, buf.getvalue())
+        result.plot(args.plot)
     if args.json is not None:
         import phs
 
