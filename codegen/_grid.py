@@ -48,6 +48,34 @@ def time_grid(t) -> np.ndarray:
     return t
 
 
+#: An input breakpoint this close to a grid point is that grid point: a nanosecond (relative to the time
+#: for late times), and never more than a thousandth of the grid's finest spacing.
+_SNAP_REL, _SNAP_OF_STEP = 1e-9, 1e-3
+
+
+def snap_to_grid(t: np.ndarray, x: float, step: float | None = None) -> tuple[float, int | None]:
+    """``(t[i], i)`` when ``x`` lies within rounding of the grid point ``t[i]``, else ``(x, None)``.
+
+    Rounding is ``1e-9 * max(1, |x|)`` seconds, at most a thousandth of the finest spacing of ``t``
+    (``step`` when the caller knows it):
+    a square wave's edge computed as ``k * period / 2`` lands on the grid point it was meant for,
+    so the segments on either side agree on which of them owns that point.
+
+    Examples
+    --------
+    >>> t = np.arange(0, 11) * 1e-3
+    >>> snap_to_grid(t, 0.0075 * 0.8 + 1e-18)          # 6 ms, up to rounding: grid point 6
+    (0.006, 6)
+    >>> snap_to_grid(t, 0.0065)                         # between grid points 6 and 7
+    (0.0065, None)
+    """
+    h = step if step is not None else float(np.min(np.diff(t)))
+    tol = min(_SNAP_REL * max(1.0, abs(x)), _SNAP_OF_STEP * h)
+    i = int(np.clip(np.searchsorted(t, x), 1, len(t) - 1))
+    i = i - 1 if abs(t[i - 1] - x) <= abs(t[i] - x) else i
+    return (float(t[i]), i) if abs(t[i] - x) <= tol else (float(x), None)
+
+
 def equal_runs(pts) -> list[tuple[float, float, int]]:
     """Split output points into runs of equal spacing: ``(start, step, n_steps)``.
 

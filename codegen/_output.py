@@ -1,7 +1,9 @@
 """Integrator outputs collected on the user's time grid.
 
 Between two input breakpoints the integrator is called over runs of equally spaced output points
-(:mod:`codegen._grid`); a segment end that is not a grid point is an output step of its own.
+(:mod:`codegen._grid`); a segment end that is not a grid point is an output step of its own, and a
+breakpoint within rounding of a grid point is that grid point (:func:`codegen._grid.snap_to_grid`),
+so every grid point belongs to exactly one segment's output steps.
 :func:`output_runs` walks these calls for a whole simulation and says, for every output step, which
 grid point it lands on (if any), while it fills the inputs as a result stores them: right-continuous,
 so a grid point on a breakpoint sees the new segment's input, except the final time, which has no next
@@ -18,7 +20,7 @@ import dataclasses
 
 import numpy as np
 
-from codegen._grid import bounded_runs, equal_runs
+from codegen._grid import bounded_runs, equal_runs, snap_to_grid
 from phs.errors import SimulationError
 
 
@@ -62,30 +64,35 @@ def output_runs(t, sigs, segs, inputs, U):
     array([0., 1., 1.])
     """
     nt = len(t)
+    h = float(np.min(np.diff(t)))
     for k, (a, b, choice) in enumerate(segs):
         if k == 0:
             U[0] = inputs(choice, t[:1])[0]
-        tol_a, tol_b = 1e-12 * max(1.0, abs(a)), 1e-12 * max(1.0, abs(b))
-        # inputs are right-continuous: a grid point on a breakpoint sees the new segment's input
-        ja = int(np.searchsorted(t, a - tol_a))
-        if ja < nt and abs(t[ja] - a) <= 1e-9 * max(1.0, abs(a)):
-            U[ja] = inputs(choice, np.array([a]))[0]
-        i0 = int(np.searchsorted(t, a, side="left"))
-        i1 = int(np.searchsorted(t, b, side="left"))
-        # output indices strictly inside (a, b], plus b itself if it is a grid point
-        idx_in = [i for i in range(i0, min(i1 + 1, nt)) if a < t[i] <= b + tol_b]
-        pts = [a] + [float(t[i]) for i in idx_in]
-        if pts[-1] < b - tol_b:
-            pts.append(b)
+        # a breakpoint within rounding of a grid point is that grid point, so that the segments on either
+        # side agree on who owns it: the one ending there (its output), the one starting there (its input)
+        a, ia = snap_to_grid(t, a, h)
+        b, ib = snap_to_grid(t, b, h)
+        if b <= a:  # an input feature shorter than the rounding of the grid: nothing to integrate
+            continue
+        if ia is not None:  # inputs are right-continuous: a grid point on a breakpoint sees the new segment's input
+            U[ia] = inputs(choice, np.array([a]))[0]
+        lo = ia + 1 if ia is not None else int(np.searchsorted(t, a, side="right"))
+        hi = ib if ib is not None else int(np.searchsorted(t, b, side="left"))
+        # the output steps: grid points strictly inside (a, b), then b (a grid point or not)
+        pts = [a] + t[lo:hi].tolist() + [b]
+        idx = np.array(list(range(lo, hi)) + [ib if ib is not None else -1], dtype=int)
+        pos = 0
         for ra, rh, rn, ms in bounded_runs(equal_runs(pts), sigs):
             times = ra + rh * np.arange(1, rn + 1)
             uu = inputs(choice, times)
-            j = np.minimum(np.searchsorted(t, times - 1e-12 * np.maximum(1.0, np.abs(times))), nt - 1)
-            on = np.abs(t[j] - times) <= 1e-9 * np.maximum(np.maximum(1.0, np.abs(times)), rh)
-            keep = on & (np.abs(times - b) > tol_b)  # b belongs to the next segment
+            j = idx[pos:pos + rn]
+            pos += rn
+            on = j >= 0
+            j = np.where(on, j, hi)  # an output step between grid points: the next grid point's index
+            keep = on.copy()
+            if pos == len(idx) and ib is not None and ib < nt - 1:
+                keep[-1] = False  # b belongs to the next segment, except the final time, which has no next segment
             U[j[keep]] = uu[keep]
-            if abs(times[-1] - b) <= tol_b and b >= t[-1] - tol_b:
-                U[j[-1]] = uu[-1]  # the final time has no next segment
             yield OutputRun(choice, ra, rh, rn, ms, times, j, on, uu)
 
 

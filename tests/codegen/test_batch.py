@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from codegen import Simulator, generate
+from codegen import Simulator, generate, simulate
 from codegen.batch import BatchSimulator, default_threads, deserialize_functions, serialize_functions
 from phs import DomainError, InputDataError, ParameterError, SimulationError
 from phs.signals import Sampled, sine, square, step
@@ -113,6 +113,56 @@ def test_any_grid_and_breakpoints_give_the_simulators_trajectory(rlc, freq, n, t
     sim = Simulator(rlc)
     for k, p in enumerate([{}, {"R.R": 20.0}]):
         _assert_run_equals(res[k], sim.run(t, u=u, params=p))
+
+
+def _rc_square_exact(t, amplitude, freq, tau):
+    """Capacitor voltage of an RC low-pass driven by a bipolar square wave from rest, sampled on ``t``."""
+    half = 0.5 / freq
+    edges = np.arange(half, t[-1] + half, half)
+    v, t0, out = 0.0, 0.0, np.empty(len(t))
+    level = amplitude
+    k = 0
+    for i, ti in enumerate(t):
+        while k < len(edges) and edges[k] <= ti * (1 + 1e-12):
+            v = level + (v - level) * np.exp(-(edges[k] - t0) / tau)
+            t0, level, k = edges[k], -level, k + 1
+        out[i] = level + (v - level) * np.exp(-(ti - t0) / tau)
+    return out
+
+
+# grids as the command line builds them (np.arange(0, t_end + dt / 2, dt): edges fall on grid points up to
+# rounding) and as np.linspace builds them; 200 Hz on these grids puts every edge on a grid point
+@pytest.mark.parametrize("freq", [150.0, 200.0, 250.0, 333.0, 1000.0])
+@pytest.mark.parametrize("grid", ["arange 1e-5", "arange 2e-5", "arange 1e-4", "linspace 1001"])
+def test_square_wave_batches_equal_simulate_with_edges_on_and_between_grid_points(rc, freq, grid):
+    """Batch vs ``codegen.simulate`` run by run, bitwise (tolerance zero: the same integrator calls);
+    both vs the exact RC response to within 1e-6 V (an amplitude of 1 V, rtol 1e-8 per step)."""
+    kind, arg = grid.split()
+    t = np.arange(0.0, 0.01 + float(arg) / 2, float(arg)) if kind == "arange" else np.linspace(0.0, 0.01, int(arg))
+    u = {"U": square(1.0, freq)}
+    params = [{"R.R": r} for r in (500.0, 1000.0, 2000.0)]
+    res = BatchSimulator(rc, t, threads=2).run(params, u=u, signals=("measured",))
+    assert res.ok.all(), res.errors
+    for k, p in enumerate(params):
+        ref = simulate(rc, t, u=u, params=p)
+        _assert_run_equals(res[k], ref)
+        exact = _rc_square_exact(t, 1.0, freq, p["R.R"] * 1e-6)
+        np.testing.assert_allclose(res[k]["v_C"], exact, rtol=0, atol=1e-6)
+
+
+@FAST
+@given(freq=st.floats(1.0, 5e3), dt=st.sampled_from([1e-6, 2e-6, 5e-6, 1e-5, 2e-5, 5e-5, 1e-4]),
+       t_end=st.sampled_from([1e-3, 3e-3, 1e-2, 0.1]), duty=st.sampled_from([0.5, 0.25, 0.2]))
+def test_output_steps_cover_every_grid_point_once(freq, dt, t_end, duty):
+    """Planning alone (no integration): whatever the edges' rounding, each grid point is one output step."""
+    from codegen._inputs import plan_segments
+    from codegen._output import check_covered, output_runs
+
+    t = np.arange(0.0, t_end + dt / 2, dt)
+    sigs = [square(1.0, freq, duty=duty)]
+    segs, _ = plan_segments(sigs, t)
+    U = np.zeros((len(t), 1))
+    check_covered(list(output_runs(t, sigs, segs, lambda c, tt: np.zeros((len(tt), 1)), U)), len(t), "plan")
 
 
 def test_failed_runs_carry_the_simulators_errors_and_do_not_affect_others(electromechanical, msd):

@@ -7,8 +7,10 @@
   evaluator's functions), and agrees with a plain loop over
   ``Simulator.run`` computing the same metrics to 1e-12 relative (it is
   another code path through the same integrators; in practice it is bitwise too).
-* A study killed (SIGKILL) midway and resumed ends with every run exactly once
-  and the values of an uninterrupted study; only the missing runs run again.
+* A study killed at each dangerous point of its store (a part's or the results
+  file's temporary file synced; before and after the rename of a part or of the
+  results file) and resumed ends with every run exactly once, the values of an
+  uninterrupted study and no temporary file; only the missing runs run again.
 * Failing runs (domain exits, a metric raising, a failing input function) are
   recorded with their errors and do not stop the study.
 """
@@ -18,10 +20,8 @@ from __future__ import annotations
 import logging
 import math
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -157,64 +157,146 @@ def test_dask_scheduler_given_by_address(msd_hasel_system, dask_client):
 
 
 # -- interruption and resume -------------------------------------------------------------------------
+# The study runs in a subprocess whose os.fsync / os.replace (and the store's atomic writer) stop the process (os._exit: no cleanup, no
+# flush, as a SIGKILL) at exactly one dangerous point of the store: the nth time a part's or the results
+# file's temporary file has been synced, or just before / just after the nth rename of a part or of the
+# results file.  Chunks of 4 runs, the results file rewritten after every chunk (flush_seconds=0): 10 parts,
+# 10 rewrites, deterministic.
+KILLED = 86
 KILLED_STUDY = """
-import sys, time
+import os, sys
 import numpy as np
 from phs.workflows.sweep import Study, sweep, Uniform
 from systems.examples import rc_circuit
 
-def slow_final(res):
-    time.sleep(0.02)  # slow enough to be killed midway
-    return float(res["v_C"][-1])
-
 def build():
-    return Study(rc_circuit(), np.linspace(0.0, 2e-3, 41), u={"U": 1.0}, grid={"R.R": np.linspace(500.0, 2000.0, 12)},
+    return Study(rc_circuit(), np.linspace(0.0, 2e-3, 41), u={"U": 1.0}, grid={"R.R": np.linspace(500.0, 2000.0, 4)},
                  distributions={"C.C": Uniform(5e-7, 2e-6)}, samples=10, seed=1,
-                 metrics={"final": slow_final, "energy": "energy"})
+                 metrics={"final": "final:v_C", "energy": "energy"})
+
+def kill_at(out, point, nth):
+    # stop the process at the nth occurrence of point: part-fsynced, part-before-rename, part-after-rename,
+    # results-fsynced, results-before-rename, results-after-rename
+    import phs.workflows.sweep.store as store
+
+    real_fsync, real_replace, real_write = os.fsync, os.replace, store.write_atomic
+    parts = out + ".parts"
+    state = {"writing": None, "seen": 0}
+
+    def kind_of(path):  # a part, or the results file (written staged in the parts, then renamed onto out)
+        path = os.path.abspath(path)
+        if path == out:
+            return "results"
+        if os.path.dirname(path) == parts:
+            return "part" if os.path.basename(path).startswith("part-") else "staged"
+        return None
+
+    def stop_if(key):
+        if key == point:
+            state["seen"] += 1
+            if state["seen"] == nth:
+                os._exit(int(sys.argv[4]))
+
+    def write_atomic(path, data):
+        state["writing"] = {"part": "part", "staged": "results"}.get(kind_of(path))
+        try:
+            real_write(path, data)
+        finally:
+            state["writing"] = None
+
+    def fsync(fd):
+        real_fsync(fd)
+        if state["writing"] is not None:  # the temporary file of a part or of the results file is on disk
+            stop_if(state["writing"] + "-fsynced")
+
+    def replace(src, dst):
+        kind = kind_of(dst)
+        if kind in ("part", "results"):
+            stop_if(kind + "-before-rename")
+        real_replace(src, dst)
+        if kind in ("part", "results"):
+            stop_if(kind + "-after-rename")
+
+    store.write_atomic, os.fsync, os.replace = write_atomic, fsync, replace
 
 if __name__ == "__main__":
-    sweep(build(), sys.argv[1], chunk_size=4, threads=1, progress=False, flush_seconds=0.2)
+    out, point, nth = os.path.abspath(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+    kill_at(out, point, nth)
+    sweep(build(), out, chunk_size=4, threads=1, progress=False, flush_seconds=0)
 """
+# (point, nth, runs on disk when killed, leftover in the part directory that resuming must remove)
+KILL_POINTS = [
+    ("part-fsynced", 1, 0, ".tmp-"),             # before the first rename: only a temporary file exists
+    ("part-before-rename", 3, 8, ".tmp-"),
+    ("part-after-rename", 1, 4, None),
+    ("part-after-rename", 3, 12, None),
+    ("results-fsynced", 1, 4, ".tmp-"),          # the first results file, synced, not yet staged
+    ("results-before-rename", 1, 4, "results."),  # staged, not yet renamed onto OUT (which does not exist)
+    ("results-before-rename", 3, 12, "results."),  # staged, OUT holds the rows of the previous rewrite
+    ("results-after-rename", 3, 12, None),
+    ("results-after-rename", 10, 40, None),       # the final rewrite: the parts are not yet removed
+]
 
 
-def test_killed_study_resumes_with_every_run_exactly_once(tmp_path):
-    script = tmp_path / "study.py"
+@pytest.fixture(scope="module")
+def killed_study(tmp_path_factory):
+    """The study of KILLED_STUDY, its script, and the table of an uninterrupted run."""
+    script = tmp_path_factory.mktemp("killed") / "study.py"
     script.write_text(KILLED_STUDY)
-    out = tmp_path / "results.parquet"
-    parts = Path(str(out) + ".parts")
-    proc = subprocess.Popen([sys.executable, str(script), str(out)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if parts.is_dir() and len([p for p in parts.iterdir() if p.name.startswith("part-")]) >= 5:
-                break
-            time.sleep(0.05)
-        assert proc.poll() is None, "the study finished before it could be killed: " + proc.stderr.read().decode()[-2000:]
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     namespace: dict = {"__name__": "killed_study"}
     exec(compile(KILLED_STUDY, str(script), "exec"), namespace)
     study = namespace["build"]()
+    reference = sweep(study, threads=1, progress=False)
+    return script, study, _table(reference)
+
+
+@pytest.mark.parametrize(("point", "nth", "on_disk", "leftover"), KILL_POINTS)
+def test_study_killed_at_each_dangerous_point_resumes_with_every_run_exactly_once(tmp_path, killed_study, point,
+                                                                                   nth, on_disk, leftover):
+    script, study, reference = killed_study
+    out = tmp_path / "results.parquet"
+    parts = Path(str(out) + ".parts")
+    proc = subprocess.run([sys.executable, str(script), str(out), point, str(nth), str(KILLED)], cwd=ROOT, capture_output=True,
+                          timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.returncode == KILLED, f"the kill point was not reached (exit {proc.returncode}): " \
+                                      + proc.stderr.decode()[-2000:]
+    left = sorted(p.name for p in parts.iterdir() if not p.name.startswith("part-")) if parts.is_dir() else []
+    if leftover is None:
+        assert not left
+    else:
+        assert left and all(name.startswith(leftover) for name in left), left
     with pytest.raises(InputDataError, match="resume"):
         sweep(study, out, progress=False)  # nothing is overwritten without resume
     done_before = set()
     for src in ([out] if out.exists() else []) + sorted(parts.glob("part-*.parquet")):
         done_before |= {int(r["run"]) for r in read_rows(src)[0]}
-    assert 0 < len(done_before) < study.n_runs
+    assert len(done_before) == on_disk
 
     resumed = sweep(study, out, resume=True, threads=2, progress=False)
-    assert resumed.new_runs == study.n_runs - len(done_before)  # finished runs are not redone
+    assert resumed.new_runs == study.n_runs - on_disk  # finished runs are not redone
     rows, _ = read_rows(out)
-    runs = sorted(int(r["run"]) for r in rows)
-    assert runs == list(range(study.n_runs))  # every run exactly once
-    assert not parts.exists()
-    reference = sweep(study, tmp_path / "reference.csv", threads=1, progress=False)
-    _assert_tables_equal(_table(resumed), _table(reference), "resumed vs uninterrupted")
+    assert sorted(int(r["run"]) for r in rows) == list(range(study.n_runs))  # every run exactly once
+    assert not parts.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["results.parquet"]  # no temp file
+    _assert_tables_equal(_table(resumed), reference, "resumed vs uninterrupted")
+    _assert_tables_equal(_table(StudyResult.read(out)), reference, "file vs uninterrupted")
+
+
+def test_a_refused_resume_leaves_the_leftovers_of_a_kill_alone(tmp_path, rc):
+    """Leftovers are removed only once the files on disk are known to belong to the study resumed."""
+    def build(metric):
+        return Study(rc, [0.0, 1e-3], u={"U": 1.0}, grid={"R.R": [1e3, 2e3]}, metrics=[metric])
+
+    out = tmp_path / "r.csv"
+    parts = Path(str(out) + ".parts")
+    parts.mkdir()
+    (parts / "part-00000000000000000001-abcdef01.csv").write_text("run,R.R,final_v_C,status,error\n0,1000.0,0.5,ok,\n")
+    orphan = parts / ".tmp-x1y2z3.csv"
+    orphan.write_text("run,R.R,final_v_")
+    with pytest.raises(InputDataError, match="columns differ"):
+        sweep(build("peak:v_C"), out, resume=True, progress=False)
+    assert orphan.exists()
+    res = sweep(build("final:v_C"), out, resume=True, progress=False)
+    assert res.new_runs == 1 and not parts.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
 
 
 def test_interrupted_in_process_study_keeps_its_finished_runs(tmp_path, rc):
@@ -503,6 +585,52 @@ def test_cli_sweep_against_a_recording_scores_fit_percent(tmp_path, capsys):
     assert "--data gives the time grid" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("dt", ["1e-5", "1e-4"])
+def test_cli_sweep_of_a_square_wave_with_edges_on_the_grid(tmp_path, capsys, dt):
+    """200 Hz on a grid of 10 or 100 us: every edge lands on a grid point, up to rounding."""
+    from codegen import simulate
+    from phs.signals import square
+    from systems.examples import rc_circuit
+
+    out = tmp_path / "sw.csv"
+    assert main(["sweep", "systems.examples:rc_circuit", "--range", "R.R=500:2000:4", "--input", "square(1.0, 200)",
+                 "--metric", "peak:v_C", "--t-end", "0.01", "--dt", dt, "--out", str(out), "--quiet"]) == 0
+    res = StudyResult.read(out)
+    assert res.ok.all(), res.failed
+    t = np.arange(0.0, 0.01 + float(dt) / 2, float(dt))
+    for r, highest in zip(res["R.R"], res["peak_v_C"]):
+        assert highest == simulate(rc_circuit(), t, u={"U": square(1.0, 200.0)}, params={"R.R": r})["v_C"].max()
+
+
+MAX_FAILED_CASES = [  # (extra options, exit code, failed runs): U = 1/(V - 1000 t) is infinite at t = 0 for V = 0
+    (["--range", "V=0,100,200"], 0, 1),                              # a third failed: below the default half
+    (["--range", "V=0,100,200", "--max-failed", "0.2"], 2, 1),       # more than the share allowed
+    (["--range", "V=0,0,100", "--max-failed", "0.5"], 2, 2),         # two thirds
+    (["--range", "V=0,-0.0", "--max-failed", "1"], 2, 2),            # every run failed: always an error
+]
+
+
+@pytest.mark.parametrize(("extra", "code", "n_failed"), MAX_FAILED_CASES)
+def test_cli_sweep_fails_loudly_when_too_many_runs_failed(tmp_path, capsys, extra, code, n_failed):
+    out = tmp_path / "f.csv"
+    assert main(["sweep", "systems.examples:rc_circuit", "--input", "U=1/(V-1000*t)", "--metric", "peak:v_C",
+                 "--t-end", "0.01", "--dt", "1e-3", "--out", str(out), "--quiet", *extra]) == code
+    res = StudyResult.read(out)  # the results are written either way
+    assert len(res.failed) == n_failed
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("phs: error")]
+    if code == 0:
+        assert not err
+        return
+    assert len(err) == 1 and "first failure, run 0: simulation of 'rc': the integrator failed" in err[0]
+    assert ("every run failed" if n_failed == len(res) else f"{n_failed} of {len(res)} runs failed") in err[0]
+
+
+def test_max_failed_must_be_a_share(tmp_path, capsys):
+    assert main(["sweep", MSD, "--range", "k.K=1:2:2", "--metric", "peak:position", "--t-end", "1", "--dt", "0.1",
+                 "--out", str(tmp_path / "s.csv"), "--max-failed", "1.5"]) == 2
+    assert "--max-failed must be a share from 0 to 1" in capsys.readouterr().err
+
+
 def test_progress_bar_on_stderr(rc, capsys):
     study = Study(rc, [0.0, 1e-3], u={"U": 1.0}, grid={"R.R": [1e3, 2e3, 3e3]}, metrics=["final:v_C"])
     sweep(study, progress=True)
@@ -514,3 +642,60 @@ def test_cli_metric_specifications():
     assert metric("rise_time:x:0.1:").name == "rise_time_x"
     with pytest.raises(InputDataError, match="a fit needs a recording"):
         metric("fit:tip")
+
+
+# -- plots are written atomically, with units on their axes ------------------------------------------------
+def _study_and_fit(rc):
+    import phs
+    from codegen import simulate
+    from phs.workflows.recording import Recording
+
+    study = sweep(Study(rc, np.linspace(0.0, 1e-3, 11), u={"U": 1.0}, grid={"R.R": [1e3, 2e3]},
+                        metrics=["final:v_C", "energy"]), progress=False)
+    t = np.linspace(0.0, 5e-3, 101)
+    u = np.where(t < 2e-3, 1.0, 0.0)
+    rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc.with_params({"R.R": 1500.0}), t, u={"U": u})["v_C"]})
+    return study, phs.identify(rc, rec, free=["R.R"])
+
+
+def test_plots_label_their_axes_with_units(rc, tmp_path):
+    study, fit = _study_and_fit(rc)
+    fig = study.plot(tmp_path / "study.png")
+    labels = {a.get_xlabel() for a in fig.axes} | {a.get_ylabel() for a in fig.axes}
+    assert {"R.R [Ohm]", "final_v_C [V]", "energy [J]"} <= labels
+    assert fit.plot(tmp_path / "fit.png").axes[-1].get_xlabel() == "t [s]"
+    assert fit.plot().axes[0].get_ylabel() == "v_C [V]"
+    out = tmp_path / "r.parquet"
+    sweep(Study(rc, [0.0, 1e-3], u={"U": 1.0}, grid={"R.R": [1e3]}, metrics=["peak:v_C"]), out, progress=False)
+    assert StudyResult.read(out).units == {"R.R": "Ohm", "peak_v_C": "V"}  # carried by the Parquet file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.png", "r.parquet", "study.png"]
+
+
+@pytest.mark.parametrize("which", ["study", "fit"])
+def test_a_plot_failing_midway_leaves_no_file_and_an_existing_one_untouched(rc, tmp_path, monkeypatch, which):
+    from matplotlib.figure import Figure
+
+    study, fit = _study_and_fit(rc)
+    plot = study.plot if which == "study" else fit.plot
+    real = Figure.savefig
+
+    def half_then_fail(self, fname, *args, **kwargs):
+        real(self, fname, *args, **kwargs)  # the image is rendered (into memory), then the disk is full
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", half_then_fail)
+    new = tmp_path / "new.png"
+    with pytest.raises(OSError):
+        plot(new)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no partial file, no temporary file
+    old = tmp_path / "old.png"
+    old.write_bytes(b"the previous figure")
+    with pytest.raises(OSError):
+        plot(old)
+    assert old.read_bytes() == b"the previous figure" and sorted(p.name for p in tmp_path.iterdir()) == ["old.png"]
+    monkeypatch.undo()
+    plot(old)
+    assert old.read_bytes()[:4] == b"\x89PNG"
+    with pytest.raises(InputDataError, match="unknown image format 'xyz'"):
+        plot(tmp_path / "f.xyz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.png"]

@@ -90,8 +90,14 @@ class IdentificationResult:
         return self.sensitivity
 
     def plot(self, path=None, recording=None):
-        """Measured versus simulated for each channel (and residuals); returns the matplotlib figure."""
+        """Measured versus simulated for each channel (and residuals); returns the matplotlib figure.
+
+        Axes are labelled ``name [unit]``; with ``path`` the figure is saved atomically in the format of
+        its suffix (either the whole file appears or, on any failure, nothing changes).
+        """
         import matplotlib
+
+        from phs.workflows.figures import axis_label, save_figure
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
@@ -103,12 +109,12 @@ class IdentificationResult:
         for ax, ch in zip(axes[:, 0], self.outputs, strict=True):
             ax.plot(rec.t, rec[ch], lw=1, label="measured")
             ax.plot(rec.t, res[ch], lw=1, label=f"model (fit {nrmse_fit(rec[ch], res[ch]):.1f} %)")
-            ax.set_ylabel(ch)
+            ax.set_ylabel(axis_label(ch, {m.name: m.unit for m in self.system.measured}.get(ch, "")))
             ax.legend(fontsize=8)
         axes[-1, 0].set_xlabel("t [s]")
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=90)
+            save_figure(fig, path, dpi=90)
         return fig
 
 

@@ -4,7 +4,7 @@
 
     phs sweep MODEL --range NAME=LO:HI:N ... [--param NAME=VALUE ...] [--samples N]
               --metric SPEC ... --t-end T --dt DT [--input EXPR ...] --out results.parquet
-              [--scheduler ADDRESS | --processes N] [--resume] [--plot FILE] [--json FILE]
+              [--scheduler ADDRESS | --processes N] [--resume] [--plot FILE] [--json FILE] [--max-failed SHARE]
 
 ``--range`` takes ``NAME=LO:HI:N`` (a grid axis of N values, ``NAME=LO:HI:N:log`` geometric),
 ``NAME=V1,V2,...`` (listed values) or ``NAME=LO:HI`` (``:log``) for a variable drawn
@@ -12,6 +12,9 @@
 parameter of the model may be used by name in ``--input`` expressions (``--range V=1:5:5
 --input "V=step(1000*V, 0.05)"`` sweeps a step amplitude in kV).  ``--from-fit FIT.json`` (the
 ``--json`` of ``phs fit``) draws the fitted parameters from their estimated covariance.
+Failed runs are rows of the results like the others (status ``failed`` and their error); when every
+run failed, or more than ``--max-failed`` of them (default half), the command still writes its
+outputs and then exits with an error naming the first failure.
 
 Examples
 --------
@@ -25,13 +28,14 @@ Examples
 
 from __future__ import annotations
 
+import argparse
 import ast
 import json
 import math
 
 import numpy as np
 
-from phs.errors import InputDataError, ParameterError
+from phs.errors import InputDataError, ParameterError, SimulationError
 from phs.io import write_atomic
 from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _positive
 from phs.workflows.inputs import input_signals, parse_assignments
@@ -40,6 +44,9 @@ from phs.workflows.sweep.design import LogUniform, Uniform, from_fit
 from phs.workflows.sweep.metrics import metric
 from phs.workflows.sweep.run import sweep
 from phs.workflows.sweep.study import Study
+
+#: Default of ``--max-failed``: a study in which more than half of the runs failed exits with an error.
+MAX_FAILED = 0.5
 
 
 def add_subcommand(sub) -> None:
@@ -88,11 +95,56 @@ def add_subcommand(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="evaluate on the Dask cluster at ADDRESS (tcp://host:8786)")
     p.add_argument("--chunk", type=_positive("--chunk", integer=True), metavar="N", help="runs per chunk / Dask task")
     p.add_argument("--plot", metavar="FILE", help="PNG of every metric against every variable")
+    p.add_argument("--max-failed", type=_share, default=MAX_FAILED, metavar="SHARE",
+                   help=f"exit with an error when more than this share of the runs failed (default {MAX_FAILED}); "
+                        "a study whose every run failed is always an error")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=run_sweep)
 
 
 # -- option parsing -------------------------------------------------------------------------------------
+def _share(text: str) -> float:
+    """argparse type of ``--max-failed``: a number from 0 to 1."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"--max-failed must be a share from 0 to 1, got {text!r}")
+    return v
+
+
+def check_failures(result, max_failed: float = MAX_FAILED) -> None:
+    r"""Raise when every run of a study failed, or more than the share ``max_failed`` of them.
+
+    The results are written before: the error only makes the command fail, naming how many runs
+    failed and the first failure (lowest run number) in one line.
+
+    Raises
+    ------
+    SimulationError
+        Naming the count, the share allowed and the first failed run's error.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phs.workflows.sweep import StudyResult
+    >>> cols = {"run": np.arange(4), "status": np.array(["ok", "failed", "failed", "failed"], dtype=object),
+    ...         "error": np.array(["", "boom\nat t=1", "boom", "boom"], dtype=object)}
+    >>> check_failures(StudyResult(cols, [], []), max_failed=0.75)
+    >>> check_failures(StudyResult(cols, [], []))
+    Traceback (most recent call last):
+    ...
+    phs.errors.SimulationError: 3 of 4 runs failed (more than --max-failed 0.5); first failure, run 1: boom at t=1
+    """
+    failed, n = result.failed, len(result)
+    if not failed or (len(failed) < n and len(failed) <= max_failed * n):
+        return
+    run, error = failed[0]
+    why = "every run failed" if len(failed) == n else f"{len(failed)} of {n} runs failed (more than --max-failed {max_failed:g})"
+    raise SimulationError(f"{why}; first failure, run {run}: {' '.join(error.split())}")
+
+
 def parse_range(item: str):
     """Parse one ``--range`` value into ``(name, values)`` (a grid axis) or ``(name, distribution)``.
 
@@ -271,12 +323,7 @@ def run_sweep(args) -> int:
                    processes=args.processes, scheduler=args.scheduler, chunk_size=args.chunk, progress=not args.quiet)
     print(result.summary())
     if args.plot is not None:
-        import io
-
-        fig = result.plot()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=100)
-        write_atomic(args.plot, buf.getvalue())
+        result.plot(args.plot)
     if args.json is not None:
         import phs
 
@@ -289,6 +336,7 @@ def run_sweep(args) -> int:
                "metric_ranges": {c: _range(result[c][result.ok]) for c in result.metrics},
                "failures": [{"run": r, "error": e} for r, e in result.failed[:50]]}
         write_atomic(args.json, json.dumps(_finite_or_none(doc), indent=1, allow_nan=False) + "\n")
+    check_failures(result, args.max_failed)
     return 0
 
 

@@ -15,7 +15,7 @@ for a whole chunk at once, and whether they need the energy accounts.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -44,6 +44,8 @@ class Metric:
         For tables and plots.
     grid : array, optional
         The time grid the metric requires (a recording's), checked when the study is defined.
+    unit_of : str
+        Without ``unit``: the signal whose unit the metric has (a peak or a final value of it).
 
     Examples
     --------
@@ -66,6 +68,7 @@ class Metric:
     unit: str = ""
     description: str = ""
     grid: np.ndarray | None = None
+    unit_of: str = ""
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -108,7 +111,7 @@ def peak(signal: str, absolute: bool = False, name: str | None = None) -> Metric
         y = _signal(res, signal)
         return float(np.max(np.abs(y)) if absolute else np.max(y))
 
-    return Metric(label, f, reads=(signal,), description=f"peak of {'|' + signal + '|' if absolute else signal}")
+    return Metric(label, f, reads=(signal,), unit_of=signal, description=f"peak of {'|' + signal + '|' if absolute else signal}")
 
 
 def final(signal: str, name: str | None = None) -> Metric:
@@ -119,7 +122,7 @@ def final(signal: str, name: str | None = None) -> Metric:
     >>> final("displacement").name
     'final_displacement'
     """
-    return Metric(name or f"final_{signal}", lambda res: float(_signal(res, signal)[-1]), reads=(signal,),
+    return Metric(name or f"final_{signal}", lambda res: float(_signal(res, signal)[-1]), reads=(signal,), unit_of=signal,
                   description=f"{signal} at the final time")
 
 
@@ -280,7 +283,7 @@ def values_at(signal: str, times: Sequence[float], name: str | None = None) -> M
         return np.interp(times, res.t, _signal(res, signal))
 
     return Metric(name or f"{signal}@", f, columns=tuple(f"{signal}@{x:g}" for x in times), reads=(signal,),
-                  description=f"{signal} at given times")
+                  unit_of=signal, description=f"{signal} at given times")
 
 
 _KINDS = {"peak": peak, "peak_abs": lambda s: peak(s, absolute=True), "final": final, "rise_time": rise_time}
@@ -351,14 +354,12 @@ def as_metrics(metrics, recording=None, default_reads: tuple = ()) -> list[Metri
     items = metrics.items() if isinstance(metrics, dict) else [(None, m) for m in (metrics or ())]
     for name, m in items:
         if isinstance(m, Metric):
-            mm = m if name is None or name == m.name else Metric(name, m.function, () if len(m.columns) == 1
-                                                                  else m.columns, m.reads, m.energy, m.unit,
-                                                                  m.description, m.grid)
+            mm = m if name is None or name == m.name else replace(
+                m, name=name, columns=() if len(m.columns) == 1 else m.columns)
         elif isinstance(m, str):
             mm = metric(m, recording)
             if name is not None:
-                mm = Metric(name, mm.function, () if len(mm.columns) == 1 else mm.columns, mm.reads, mm.energy,
-                            mm.unit, mm.description, mm.grid)
+                mm = replace(mm, name=name, columns=() if len(mm.columns) == 1 else mm.columns)
         elif callable(m):
             label = name or getattr(m, "__name__", "")
             if not label or label == "<lambda>":
@@ -375,4 +376,28 @@ def as_metrics(metrics, recording=None, default_reads: tuple = ()) -> list[Metri
             if c in seen:
                 raise InputDataError(f"metrics {seen[c]!r} and {m.name!r} both write a column {c!r}")
             seen[c] = m.name
+    return out
+
+
+def column_units(system, metrics, variables) -> dict[str, str]:
+    """Units of a study's columns by name: parameters' declared units, metrics' units (or the unit of
+    the signal they read); columns of unknown unit are left out.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> column_units(rc_circuit(), [peak("v_C"), energy()], ["R.R", "V"])
+    {'R.R': 'Ohm', 'peak_v_C': 'V', 'energy': 'J'}
+    """
+    s = system
+    signals = {p.name: p.unit for p in s.params}
+    signals.update({x.name: x.unit for x in s.states})
+    signals.update({i.name: i.unit for i in s.inputs})
+    signals.update({i.output: i.output_unit for i in s.inputs})
+    signals.update({m.name: m.unit for m in s.measured})
+    out = {v: signals[v] for v in variables if signals.get(v)}
+    for m in metrics:
+        unit = m.unit or signals.get(m.unit_of, "")
+        if unit:
+            out.update({c: unit for c in m.columns})
     return out

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from phs.errors import InputDataError
+from phs.workflows.figures import axis_label, save_figure
 from phs.workflows.sweep.store import read_rows
 
 
@@ -27,6 +28,8 @@ class StudyResult:
         Wall time of the evaluation that produced the new rows.
     new_runs : int
         Runs evaluated by that evaluation (the others came from a resumed file).
+    units : dict of str -> str
+        Units of the columns whose unit is known (parameters, metrics), for plots.
 
     ``result[name]`` is a column; ``len(result)`` the number of runs.
 
@@ -43,7 +46,7 @@ class StudyResult:
     """
 
     def __init__(self, columns: dict, variables: list[str], metrics: list[str], path=None, seconds: float = 0.0,
-                 new_runs: int = 0, system_name: str = ""):
+                 new_runs: int = 0, system_name: str = "", units: dict | None = None):
         self.columns = columns
         self.variables = list(variables)
         self.metrics = list(metrics)
@@ -51,6 +54,7 @@ class StudyResult:
         self.seconds = float(seconds)
         self.new_runs = int(new_runs)
         self.system_name = system_name
+        self.units = dict(units or {})
 
     @classmethod
     def read(cls, path) -> StudyResult:
@@ -79,7 +83,8 @@ class StudyResult:
             cols[c] = np.array([float(r[c]) for r in rows], dtype=float)
         cols["status"] = np.array([r["status"] for r in rows], dtype=object)
         cols["error"] = np.array([r["error"] for r in rows], dtype=object)
-        return cls(cols, variables, metrics, path=os.fspath(path), system_name=meta.get("system", ""))
+        return cls(cols, variables, metrics, path=os.fspath(path), system_name=meta.get("system", ""),
+                   units=meta.get("units"))
 
     def __len__(self) -> int:
         return len(self.columns["run"])
@@ -133,11 +138,24 @@ class StudyResult:
 
     __str__ = summary
 
+    def label(self, column: str) -> str:
+        """Axis label of a column: ``name [unit]`` when its unit is known.
+
+        Examples
+        --------
+        >>> r = StudyResult({"run": np.arange(1)}, ["R.R"], ["n"], units={"R.R": "Ohm", "n": "1"})
+        >>> r.label("R.R"), r.label("n"), r.label("other")
+        ('R.R [Ohm]', 'n [-]', 'other')
+        """
+        return axis_label(column, self.units.get(column, ""))
+
     def plot(self, path=None, metrics: Sequence[str] | None = None, variables: Sequence[str] | None = None):
         """Each metric against each variable (failed runs as red crosses on the lower edge).
 
-        With two or more variables, points are coloured by the next variable.  Returns the
-        matplotlib figure (saved to ``path`` when given).
+        With two or more variables, points are coloured by the next variable; axes are labelled
+        ``name [unit]`` where the unit is known.  Returns the matplotlib figure, saved to ``path``
+        when given (atomically, in the format of its suffix: either the whole file appears or,
+        on any failure, nothing changes).
         """
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -164,22 +182,22 @@ class StudyResult:
                 if other is not None and good.any():
                     sc = ax.scatter(x[good], y[good], c=self.columns[other][good], s=12, cmap="viridis")
                     if i == 0:
-                        fig.colorbar(sc, ax=ax, label=other)
+                        fig.colorbar(sc, ax=ax, label=self.label(other))
                 else:
                     ax.scatter(x[good], y[good], s=12)
                 if (~ok).any():
                     ax.scatter(x[~ok], np.full(int((~ok).sum()), lo), marker="x", color="red", s=18,
                                label="failed" if (i, j) == (0, 0) else None)
                 if i == len(metrics) - 1:
-                    ax.set_xlabel(v)
+                    ax.set_xlabel(self.label(v))
                 if j == 0:
-                    ax.set_ylabel(m)
+                    ax.set_ylabel(self.label(m))
                 ax.grid(True, alpha=0.3)
         if (~ok).any():
             axes[0, 0].legend(fontsize="small")
         fig.suptitle(f"{self.system_name}: {len(self)} runs ({int((~ok).sum())} failed)")
         if path is not None:
-            fig.savefig(path, dpi=100)
+            save_figure(fig, path, dpi=100)
         return fig
 
     def __repr__(self) -> str:

@@ -9,6 +9,7 @@ import numpy as np
 
 from phs.errors import InputDataError
 from phs.workflows.sweep.evaluate import _describe, _evaluate_chunk, _Evaluator, _failed_row
+from phs.workflows.sweep.metrics import column_units
 from phs.workflows.sweep.result import StudyResult
 from phs.workflows.sweep.store import ResultStore
 from phs.workflows.sweep.study import Study
@@ -89,7 +90,8 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
     progress : bool
         Show a progress bar (on stderr).
     flush_seconds : float
-        How often the results file is rewritten from the finished runs (parts are written at once).
+        How often the results file is rewritten from the finished runs (parts are written at once;
+        0 rewrites it after every chunk).
 
     Returns
     -------
@@ -128,7 +130,8 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
     meta = {"system": study.system.name, "model_hash": study.system.model_hash(), "phs_version": phs.__version__,
             "casadi_version": casadi.__version__, "variables": study.variables,
             "metrics": [c for m in study.metrics for c in m.columns], "n_runs": study.n_runs, "seed": study.seed,
-            "sampling": study.sampling, "samples": study.samples}
+            "sampling": study.sampling, "samples": study.samples,
+            "units": column_units(study.system, study.metrics, study.variables)}
 
     def design(run):
         return study.values(run) if 0 <= run < study.n_runs else None
@@ -159,7 +162,7 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
     seconds = _time.perf_counter() - wall
     metrics = [c for m in study.metrics for c in m.columns]
     return StudyResult(store.table(), study.variables, metrics, path=store.path, seconds=seconds,
-                       new_runs=len(todo), system_name=study.system.name)
+                       new_runs=len(todo), system_name=study.system.name, units=meta["units"])
 
 
 def _run_dask(study, todo, store, bar, scheduler, processes, threads, chunk_size) -> None:

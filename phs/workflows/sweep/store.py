@@ -7,16 +7,26 @@ message, empty for a run that succeeded).
 
 While a study runs, every finished chunk of runs is written at once to its own
 part file in the directory ``OUT.parts`` (each written atomically: a part is
-either complete or absent), and ``OUT`` itself is rewritten atomically from
-everything finished so far every few seconds and at the end, when the part
-directory is removed.  A study killed at any moment has lost at most the
-chunks that were still running; resuming it reads ``OUT`` and the parts,
-checks that they belong to the same study (same variables and metric columns,
-same variable values for each run number) and runs only what is missing.
+either complete or absent), and ``OUT`` itself is rewritten from everything
+finished so far every few seconds and at the end, when the part directory is
+removed.  ``OUT`` is written atomically into the part directory first
+(``OUT.parts/results.EXT``) and renamed onto ``OUT``: every temporary file of
+a study lives in its part directory, so that resuming can remove what a kill
+left behind (``.tmp-*`` files of an unfinished atomic write, a staged results
+file) without touching anything else in ``OUT``'s directory.
+
+A study killed at any moment has lost at most the chunks that were still
+running or whose part was not yet renamed into place; the dangerous moments
+(after a part's data reached the disk, before and after the rename of a part,
+before and after the rename of the results file) are each tested by a kill.
+Resuming reads ``OUT`` and the parts, checks that they belong to the same study
+(same variables and metric columns, same variable values for each run number),
+removes the leftover temporary files and runs only what is missing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -61,6 +71,11 @@ def _pyarrow():
     except ImportError:
         raise InputDataError("Parquet files need pyarrow (pip install pyarrow); or use a .csv file") from None
     return pa, pq
+
+
+def _is_part(name: str, fmt: str) -> bool:
+    """Whether a file name in a part directory is a part (``part-<time>-<random>.<fmt>``)."""
+    return name.startswith("part-") and name.endswith("." + fmt)
 
 
 def _columns_of(numeric: list[str]) -> list[str]:
@@ -198,7 +213,7 @@ class ResultStore:
     metadata : dict
         Written into Parquet files (model, variables, metrics, seed).
     flush_seconds : float
-        How often ``path`` is rewritten from the finished rows.
+        How often ``path`` is rewritten from the finished rows (0: after every part).
 
     Examples
     --------
@@ -246,8 +261,7 @@ class ResultStore:
         if os.path.exists(self.path):
             sources.append(self.path)
         if os.path.isdir(self.parts):
-            sources += sorted(os.path.join(self.parts, f) for f in os.listdir(self.parts)
-                              if f.startswith("part-") and f.endswith("." + self.fmt))
+            sources += sorted(os.path.join(self.parts, f) for f in os.listdir(self.parts) if _is_part(f, self.fmt))
         want = _columns_of(self.numeric)
         for src in sources:
             rows, _meta = read_rows(src)
@@ -274,6 +288,23 @@ class ResultStore:
                 self.rows[run] = {c: row[c] for c in want}
         if retry_failed:
             self._dirty = True
+        self._remove_leftovers()
+
+    def _remove_leftovers(self) -> None:
+        """Remove what a killed study left in its part directory besides its parts: the ``.tmp-*`` file of
+        an atomic write that never reached its rename, a staged results file that was never renamed onto
+        ``OUT`` (its rows are in the parts, which are removed only after ``OUT`` holds them)."""
+        if not os.path.isdir(self.parts):
+            return
+        for name in os.listdir(self.parts):
+            if _is_part(name, self.fmt):
+                continue
+            full = os.path.join(self.parts, name)
+            if os.path.isdir(full) and not os.path.islink(full):
+                shutil.rmtree(full, ignore_errors=True)
+            else:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(full)
 
     @property
     def done(self) -> set[int]:
@@ -295,16 +326,25 @@ class ResultStore:
         write_atomic(os.path.join(self.parts, name), encode(rows, self.numeric, self.fmt, self.metadata))
         self._dirty = True
         # rewriting a large file takes a while: at most a tenth of the time goes into it
-        if _time.monotonic() - self._last_flush >= max(self.flush_seconds, 10 * self._flush_cost):
+        if self.flush_seconds <= 0 or _time.monotonic() - self._last_flush >= max(self.flush_seconds, 10 * self._flush_cost):
             self.flush()
 
     def flush(self) -> None:
-        """Rewrite the results file (atomically) from every finished run, in run order."""
+        """Rewrite the results file from every finished run, in run order: written atomically into the
+        part directory, then renamed onto the results file (see the module docstring)."""
         if self.path is None or not self._dirty:
             return
         start = _time.monotonic()
         rows = [self.rows[k] for k in sorted(self.rows)]
-        write_atomic(self.path, encode(rows, self.numeric, self.fmt, self.metadata))
+        os.makedirs(self.parts, exist_ok=True)
+        staged = os.path.join(self.parts, "results." + self.fmt)
+        write_atomic(staged, encode(rows, self.numeric, self.fmt, self.metadata))
+        try:
+            if os.path.exists(self.path):  # keep the mode of the file it replaces
+                os.chmod(staged, os.stat(self.path).st_mode & 0o777)
+            os.replace(staged, self.path)
+        except OSError as exc:
+            raise InputDataError(f"cannot write {self.path!r}: {exc.strerror or exc}") from None
         self._last_flush = _time.monotonic()
         self._flush_cost = self._last_flush - start
         self._dirty = False
