@@ -246,14 +246,25 @@ class _Reader:
             raise self.fail(str(exc)) from None
         return text
 
+    def number(self, d, key, where, default=...) -> float | None:
+        """A JSON number (or null) as a float."""
+        return self.as_float(self.get(d, key, where, (*_NUMBER, type(None)), default), f"{where}.{key}")
+
+    def as_float(self, v, where: str) -> float | None:
+        if v is not None and (isinstance(v, bool) or not isinstance(v, _NUMBER)):
+            raise self.fail(f"field {where} is not a number")
+        try:
+            return None if v is None else float(v)
+        except OverflowError:
+            raise self.fail(f"field {where} is too large") from None
+
     def range(self, d, key, where, default):
-        v = self.get(d, key, where, default=default)
+        v = self.get(d, key, where, (list, type(None)), default)
         if v is None:
             return None
-        if not (isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(a, _NUMBER) and not isinstance(a, bool)
-                                                                     for a in v)):
+        if len(v) != 2:
             raise self.fail(f"field {where}.{key} is not a pair of numbers")
-        return tuple(float(a) for a in v)
+        return tuple(self.as_float(a, f"{where}.{key}[{i}]") for i, a in enumerate(v))
 
     def items(self, d, key) -> list:
         return self.get(d, key, "file", list)
@@ -296,7 +307,7 @@ def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
             w = f"states[{i}]"
             states.append(StateInfo(r.get(x, "name", w, str), r.unit(x, "unit", w), r.range(x, "range", w, (-1.0, 1.0)),
                                     r.get(x, "description", w, str, ""), r.get(x, "kind", w, str, "C"),
-                                    r.get(x, "scale", w, (*_NUMBER, type(None)), None), r.get(x, "owner", w, str, "")))
+                                    r.number(x, "scale", w, None), r.get(x, "owner", w, str, "")))
         inputs = []
         for i, u in enumerate(r.items(data, "inputs")):
             w = f"inputs[{i}]"
@@ -306,7 +317,7 @@ def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
         params = []
         for i, p in enumerate(r.items(data, "params")):
             w = f"params[{i}]"
-            params.append(Param(r.get(p, "name", w, str), r.get(p, "value", w, (*_NUMBER, type(None))), r.unit(p, "unit", w),
+            params.append(Param(r.get(p, "name", w, str), r.number(p, "value", w), r.unit(p, "unit", w),
                                 r.get(p, "description", w, str, ""), r.range(p, "range", w, None),
                                 r.get(p, "positive", w, (bool, type(None)), None)))
         energy = []

@@ -258,9 +258,11 @@ class Arithmetic:
         self.names, self.functions, self.exact, self.hint = dict(names), dict(functions or {}), exact, hint
 
     def number(self, value, node, text):
+        """A numeric literal (bounded; exact rationals or floats)."""
         return _number(value, node, text, self.exact)
 
     def name(self, name: str):
+        """The value of a name, or a refusal naming it."""
         if name in self.names:
             return self.names[name]
         if name in self.functions:
@@ -272,6 +274,7 @@ class Arithmetic:
         return frozenset()
 
     def call(self, name: str, args: list, kwargs: dict):
+        """A whitelisted function applied to built arguments; infinite results are refused."""
         try:
             value = self.functions[name](*args, **kwargs)
         except Refusal:
@@ -284,6 +287,7 @@ class Arithmetic:
         return check_value(value, self.exact)
 
     def binary(self, op: str, a, b):
+        """``a op b`` for an operator in :attr:`operators`, bounded (powers) and checked (division by zero)."""
         if op == "**":
             return power(a, b, self.exact)
         if op in ("/", "%") and getattr(b, "is_zero", False):
@@ -293,6 +297,7 @@ class Arithmetic:
         return check_value(value, self.exact)
 
     def negate(self, a):
+        """``-a``."""
         return -a
 
 

@@ -436,9 +436,6 @@ class _InputArithmetic(Arithmetic):
         a, b = as_signal(a), as_signal(b)
         return a + b if op == "+" else a - b if op == "-" else a * b
 
-    def negate(self, a):
-        return -a
-
 
 def _shown(value) -> str:
     text = str(value)

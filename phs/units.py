@@ -80,6 +80,7 @@ class _UnitNames(Arithmetic):
         super().__init__({}, exact=True)
 
     def name(self, name: str):
+        """Any name is a unit symbol here."""
         return sp.Symbol(name)
 
 
@@ -116,10 +117,11 @@ def unit_expression(unit: str, where: str = "") -> sp.Expr:
     ...     print(err)
     params[2].unit: unit "__import__('os')": name '__import__' is not allowed (names with '__' are reserved)
     """
+    prefix = f"{where}: " if where else ""
     if not isinstance(unit, str):
-        raise UnitError(f"{where + ': ' if where else ''}a unit must be text, not {type(unit).__name__}")
+        raise UnitError(f"{prefix}a unit must be text, not {type(unit).__name__}")
     text = unit.replace("^", "**").replace("Ω", "Ohm").strip() or "1"
-    label = f"{where + ': ' if where else ''}unit {unit!r}" if len(unit) <= 60 else f"{where + ': ' if where else ''}a unit"
+    label = prefix + (f"unit {unit!r}" if len(unit) <= 60 else "a unit")
     return evaluate(text, label, _UnitNames(), error=UnitError, max_length=_MAX_UNIT_LENGTH)
 
 
@@ -145,14 +147,16 @@ def parse_unit(unit: str, where: str = "") -> Dim:
     >>> format_dim(parse_unit("V*A"))
     'kg*m**2/s**3'
     """
-    key = unit.strip() or "1" if isinstance(unit, str) else None
+    key = (unit.strip() or "1") if isinstance(unit, str) else None
     if key in _UNIT_CACHE:
         return _UNIT_CACHE[key]
     expr = unit_expression(unit, where)
     try:
         dim = _dim_of_unit_expr(expr, unit)
     except UnitError as exc:
-        raise UnitError(f"{where}: {exc}") if where else exc from None
+        if not where:
+            raise
+        raise UnitError(f"{where}: {exc}") from None
     _UNIT_CACHE[key] = dim
     return dim
 

@@ -150,7 +150,8 @@ def test_saved_model_number_fields(tmp_path):
     base = _rc_file(tmp_path)
     path = tmp_path / "bad.json"
     for field, value, culprit in [("value", "1e3", "params[0].value"), ("value", True, "params[0].value"),
-                                  ("range", ["0", 1], "params[0].range"), ("positive", "yes", "params[0].positive")]:
+                                  ("range", ["0", 1], "params[0].range[0]"), ("range", [0, 10**400], "params[0].range[1]"),
+                                  ("value", 10**400, "params[0].value is too large"), ("positive", "yes", "params[0].positive")]:
         data = json.loads(json.dumps(base))
         data["params"][0][field] = value
         path.write_text(json.dumps(data))
