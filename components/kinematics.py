@@ -35,6 +35,7 @@ from components._base import require_positive
 from phs.component import Component, Piece
 from phs.errors import ModelError
 from phs.params import EnergyTerm, Param, check_name, state_symbol
+from phs.safe_parse import register_function
 
 # -- M^-1 without symbolic inversion -----------------------------------------------------------------------
 
@@ -134,6 +135,7 @@ class _InverseFunction(sp.Function):
         return InverseEntry(k, j, *m)
 
 
+@register_function  # saved models may name it (phs.safe_parse)
 class InverseQuadraticForm(_InverseFunction):
     """``1/2 p^T M^-1 p`` of a symmetric positive definite M given by its upper triangle.
 
@@ -170,6 +172,7 @@ class InverseQuadraticForm(_InverseFunction):
         return -self._v(a) * self._v(b) / 2
 
 
+@register_function  # saved models may name it (phs.safe_parse)
 class LinearSolve(_InverseFunction):
     """Component ``k`` of ``v = M^-1 p``; arguments ``k``, the upper triangle of M, then p.
 
@@ -203,6 +206,7 @@ class LinearSolve(_InverseFunction):
         return -self._w(idx[0], a) * self._v(b)
 
 
+@register_function  # saved models may name it (phs.safe_parse)
 class InverseEntry(_InverseFunction):
     """Entry ``(k, j)`` of ``W = M^-1``; arguments ``k, j`` and the upper triangle of M.
 

@@ -214,9 +214,9 @@ def check_system(system, samples: int = 200, seed: int = 0):
 
 def unit_problems(system) -> list[str]:
     """Energy terms whose dimension is not energy, each named with its component."""
-    units = {s.symbol: parse_unit(s.unit) for s in system.states}
-    units.update({q.symbol: parse_unit(q.unit) for q in system.params})
-    units.update({u.symbol: parse_unit(u.unit) for u in system.inputs})
+    units = {s.symbol: parse_unit(s.unit, f"state {s.name!r}") for s in system.states}
+    units.update({q.symbol: parse_unit(q.unit, f"parameter {q.name!r}") for q in system.params})
+    units.update({u.symbol: parse_unit(u.unit, f"input {u.name!r}") for u in system.inputs})
     out = []
     for t in system.energy_terms:
         try:

@@ -4,35 +4,39 @@ A saved system holds its whole definition (states, inputs, parameters with
 values and units, energy terms, the matrices J, R, G, P, S, N, measured
 outputs, validity conditions, dissipators, definitions and structure).  Every
 expression is stored as sympy's ``srepr`` string, which keeps the symbols'
-assumptions (``positive=True``), and is read back through a restricted
-namespace of sympy classes only.  Loading goes through the
-:class:`~phs.system.PHSystem` constructor, so a loaded model is validated
-again.
+assumptions (``positive=True``), and is read back by the stored grammar of
+:mod:`phs.safe_parse` (a whitelist of sympy constructors with bounded numbers:
+nothing in the file is run); units are read by :func:`phs.units.parse_unit`.
+Loading builds the class it is given (:meth:`PHSystem.load` passes
+:class:`~phs.system.PHSystem`, so this module never imports it), and the
+constructor validates the loaded model again.
 
 Examples
 --------
 >>> import tempfile, os
+>>> from phs import PHSystem
 >>> from systems.examples import rc_circuit
 >>> with tempfile.TemporaryDirectory() as d:
 ...     path = os.path.join(d, "rc.json")
 ...     save_system(rc_circuit(R=2e3), path)
-...     load_system(path).param("R.R").value
+...     load_system(path, PHSystem).param("R.R").value
 2000.0
 """
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 import tempfile
+from collections.abc import Callable
 from typing import Any
 
 import sympy as sp
-from sympy.parsing.sympy_parser import parse_expr
 
-from phs.errors import InputDataError, PHSError
+from phs.errors import InputDataError, PHSError, UnitError
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo
+from phs.safe_parse import parse_srepr
+from phs.units import parse_unit
 
 FORMAT = "phs.system"
 """Value of the ``format`` field of a saved system."""
@@ -114,14 +118,16 @@ def _plain(obj):
     return str(obj)
 
 
-def _unplain(obj, reader):
-    """Inverse of :func:`_plain`."""
+def _unplain(obj, reader, where: str, depth: int = 0):
+    """Inverse of :func:`_plain` (``where`` is the JSON path of ``obj``)."""
+    if depth > 50:
+        raise reader.fail(f"{where}: nested deeper than 50 levels")
     if isinstance(obj, dict):
         if set(obj) == {"srepr"}:
-            return reader.expr(obj["srepr"], "structure entry")
-        return {k: _unplain(v, reader) for k, v in obj.items()}
+            return reader.expr(obj["srepr"], where)
+        return {k: _unplain(v, reader, f"{where}.{k}", depth + 1) for k, v in obj.items()}
     if isinstance(obj, list):
-        return [_unplain(v, reader) for v in obj]
+        return [_unplain(v, reader, f"{where}[{i}]", depth + 1) for i, v in enumerate(obj)]
     return obj
 
 
@@ -200,84 +206,8 @@ def write_atomic(path, data: str | bytes) -> None:
 
 
 # -- reading ------------------------------------------------------------------------------
-def _sympy_namespace() -> dict[str, Any]:
-    """Sympy's public classes and constants, then every other loaded Basic subclass by name."""
-    ns: dict[str, Any] = {}
-    for name, obj in vars(sp).items():
-        if name.startswith("_"):
-            continue
-        if isinstance(obj, type) and issubclass(obj, (sp.Basic, sp.MatrixBase)):
-            ns[name] = obj
-    for name in ("pi", "E", "I", "oo", "zoo", "nan", "true", "false", "EulerGamma", "GoldenRatio", "Catalan"):
-        ns[name] = getattr(sp, name)
-    ns["Function"] = sp.Function
-    todo = [sp.Basic]
-    seen = set()
-    while todo:  # classes not exported at top level (ExprCondPair, ...) and user-defined functions
-        cls = todo.pop()
-        for sub in cls.__subclasses__():
-            if sub not in seen:
-                seen.add(sub)
-                todo.append(sub)
-                if not sub.__name__.startswith("_"):
-                    ns.setdefault(sub.__name__, sub)
-    return ns
-
-
-_NAMESPACE: dict[str, Any] = {}
-
-
-def _namespace(name: str) -> dict[str, Any]:
-    """The namespace, rebuilt when ``name`` is unknown (classes defined since the last build)."""
-    if name not in _NAMESPACE:
-        _NAMESPACE.update(_sympy_namespace())
-    return _NAMESPACE
-
-
-_ALLOWED_NODES = (ast.Expression, ast.Call, ast.Name, ast.Load, ast.Constant, ast.keyword, ast.List, ast.Tuple,
-                  ast.UnaryOp, ast.USub, ast.UAdd)
-
-
-def parse_srepr(text: str, where: str = "expression") -> sp.Basic:
-    """Rebuild a sympy object from its ``srepr`` string, allowing sympy classes only.
-
-    Parameters
-    ----------
-    text : str
-        Output of :func:`sympy.srepr`.
-    where : str
-        What the string is (used in the error message).
-
-    Raises
-    ------
-    InputDataError
-        If the string is not a call tree of sympy classes and literals.
-
-    Examples
-    --------
-    >>> e = parse_srepr(sp.srepr(sp.Symbol("C.C", positive=True) ** 2))
-    >>> e, e.free_symbols.pop().is_positive
-    (C.C**2, True)
-    """
-    if not isinstance(text, str):
-        raise InputDataError(f"{where}: expected a srepr string, got {type(text).__name__}")
-    try:
-        tree = ast.parse(text, mode="eval")
-    except SyntaxError as exc:
-        raise InputDataError(f"{where}: cannot read {text[:60]!r}: {exc.msg}") from None
-    for node in ast.walk(tree):
-        if not isinstance(node, _ALLOWED_NODES):
-            raise InputDataError(f"{where}: {type(node).__name__} is not allowed in a stored expression")
-        if isinstance(node, ast.Name) and node.id not in _namespace(node.id):
-            raise InputDataError(f"{where}: unknown name {node.id!r} (only sympy classes are allowed)")
-    try:
-        return parse_expr(text, local_dict={}, global_dict={"__builtins__": {}, **_NAMESPACE}, transformations=())
-    except Exception as exc:  # any failure of sympy's constructors means a corrupt entry
-        raise InputDataError(f"{where}: cannot rebuild {text[:60]!r}: {exc}") from None
-
-
 class _Reader:
-    """Reads one saved file and turns structural problems into InputDataError naming the file and field."""
+    """Reads one saved file; every problem becomes one InputDataError naming the file and the JSON field."""
 
     def __init__(self, path: str):
         self.path = path
@@ -293,42 +223,76 @@ class _Reader:
                 return default
             raise self.fail(f"missing field {where}.{key}")
         v = d[key]
-        if kind is not None and not isinstance(v, kind):
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if kind is not None and (not isinstance(v, kinds) or isinstance(v, bool) and bool not in kinds):
             raise self.fail(f"field {where}.{key} has type {type(v).__name__}")
         return v
 
     def expr(self, text, where) -> sp.Basic:
+        """A stored expression, read by the stored grammar of :mod:`phs.safe_parse`."""
+        if not isinstance(text, str):
+            raise self.fail(f"{where}: expected a srepr string, got {type(text).__name__}")
         try:
             return parse_srepr(text, where)
         except InputDataError as exc:
             raise self.fail(str(exc)) from None
 
+    def unit(self, d, key, where) -> str:
+        """A unit string, read by :func:`phs.units.parse_unit` (a product of powers of known unit names)."""
+        text = self.get(d, key, where, str, default="1")
+        try:
+            parse_unit(text, f"{where}.{key}")
+        except UnitError as exc:
+            raise self.fail(str(exc)) from None
+        return text
+
+    def number(self, d, key, where, default=...) -> float | None:
+        """A JSON number (or null) as a float."""
+        return self.as_float(self.get(d, key, where, (*_NUMBER, type(None)), default), f"{where}.{key}")
+
+    def as_float(self, v, where: str) -> float | None:
+        if v is not None and (isinstance(v, bool) or not isinstance(v, _NUMBER)):
+            raise self.fail(f"field {where} is not a number")
+        try:
+            return None if v is None else float(v)
+        except OverflowError:
+            raise self.fail(f"field {where} is too large") from None
+
+    def range(self, d, key, where, default):
+        v = self.get(d, key, where, (list, type(None)), default)
+        if v is None:
+            return None
+        if len(v) != 2:
+            raise self.fail(f"field {where}.{key} is not a pair of numbers")
+        return tuple(self.as_float(a, f"{where}.{key}[{i}]") for i, a in enumerate(v))
+
     def items(self, d, key) -> list:
         return self.get(d, key, "file", list)
 
 
-def _rng(v):
-    return None if v is None else tuple(float(a) for a in v)
+_NUMBER = (int, float)
 
 
-def system_from_dict(data: dict, source: str = "<dict>"):
-    """Rebuild a PHSystem from the dictionary written by :func:`system_to_dict`.
+def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
+    """The PHSystem constructor's arguments held in a dictionary written by :func:`system_to_dict`.
+
+    Every expression is read by :func:`phs.safe_parse.parse_srepr` and every unit
+    by :func:`phs.units.parse_unit` (which knows the unit names): nothing in the
+    dictionary is run.
 
     Raises
     ------
     InputDataError
-        Naming ``source`` and the missing or malformed field, or listing the
-        problems the PHSystem constructor found.
+        Naming ``source`` and the missing or malformed field (``params[2].unit``,
+        ``energy[0].expr``, ``matrices.J``, ...).
 
     Examples
     --------
     >>> from systems.examples import duffing_oscillator
-    >>> s = duffing_oscillator()
-    >>> system_from_dict(system_to_dict(s)).H == s.H
-    True
+    >>> args = system_arguments(system_to_dict(duffing_oscillator()))
+    >>> args["name"], len(args["states"]), args["J"].shape
+    ('duffing', 2, (2, 2))
     """
-    from phs.system import PHSystem
-
     r = _Reader(source)
     if not isinstance(data, dict):
         raise r.fail("the file does not hold a JSON object")
@@ -338,85 +302,122 @@ def system_from_dict(data: dict, source: str = "<dict>"):
     if version != FORMAT_VERSION:
         raise r.fail(f"unsupported format version {version!r} (this version of phs reads {FORMAT_VERSION})")
     try:
-        states = [
-            StateInfo(r.get(x, "name", "states[]", str), x.get("unit", "1"), _rng(x.get("range", (-1.0, 1.0))),
-                      x.get("description", ""), x.get("kind", "C"), x.get("scale"), x.get("owner", ""))
-            for x in r.items(data, "states")
-        ]
-        inputs = [
-            InputInfo(r.get(u, "name", "inputs[]", str), u.get("unit", "1"), u.get("output", ""),
-                      u.get("output_unit", "1"), u.get("kind", "effort"), u.get("description", ""),
-                      _rng(u.get("range")))
-            for u in r.items(data, "inputs")
-        ]
-        params = [
-            Param(r.get(p, "name", "params[]", str), r.get(p, "value", "params[]"), p.get("unit", "1"),
-                  p.get("description", ""), _rng(p.get("range")), p.get("positive"))
-            for p in r.items(data, "params")
-        ]
-        energy = [
-            EnergyTerm(r.get(e, "label", "energy[]", str),
-                       r.expr(r.get(e, "expr", "energy[]"), f"energy {e['label']!r}"))
-            for e in r.items(data, "energy")
-        ]
+        states = []
+        for i, x in enumerate(r.items(data, "states")):
+            w = f"states[{i}]"
+            states.append(StateInfo(r.get(x, "name", w, str), r.unit(x, "unit", w), r.range(x, "range", w, (-1.0, 1.0)),
+                                    r.get(x, "description", w, str, ""), r.get(x, "kind", w, str, "C"),
+                                    r.number(x, "scale", w, None), r.get(x, "owner", w, str, "")))
+        inputs = []
+        for i, u in enumerate(r.items(data, "inputs")):
+            w = f"inputs[{i}]"
+            inputs.append(InputInfo(r.get(u, "name", w, str), r.unit(u, "unit", w), r.get(u, "output", w, str, ""),
+                                    r.unit(u, "output_unit", w), r.get(u, "kind", w, str, "effort"),
+                                    r.get(u, "description", w, str, ""), r.range(u, "range", w, None)))
+        params = []
+        for i, p in enumerate(r.items(data, "params")):
+            w = f"params[{i}]"
+            params.append(Param(r.get(p, "name", w, str), r.number(p, "value", w), r.unit(p, "unit", w),
+                                r.get(p, "description", w, str, ""), r.range(p, "range", w, None),
+                                r.get(p, "positive", w, (bool, type(None)), None)))
+        energy = []
+        for i, e in enumerate(r.items(data, "energy")):
+            label = r.get(e, "label", f"energy[{i}]", str)
+            energy.append(EnergyTerm(label, r.expr(r.get(e, "expr", f"energy[{i}]"), f"energy[{i}].expr (energy {label!r})")))
         mats = r.get(data, "matrices", "file", dict)
         matrices = {}
         for k in _MATRICES:
-            M = r.expr(r.get(mats, k, "matrices", str), f"matrix {k}")
+            M = r.expr(r.get(mats, k, "matrices", str), f"matrices.{k} (matrix {k})")
             if not isinstance(M, sp.MatrixBase):
-                raise r.fail(f"matrix {k} is a {type(M).__name__}, not a matrix")
+                raise r.fail(f"matrices.{k} (matrix {k}) is a {type(M).__name__}, not a matrix")
             matrices[k] = M
-        measured = [
-            Measured(r.get(m, "name", "measured[]", str),
-                     r.expr(r.get(m, "expr", "measured[]"), f"measured {m['name']!r}"),
-                     m.get("unit", "1"), m.get("description", ""))
-            for m in r.items(data, "measured")
-        ]
-        conditions = [
-            Condition(r.get(c, "label", "conditions[]", str),
-                      r.expr(r.get(c, "expr", "conditions[]"), f"condition {c['label']!r}"), c.get("description", ""))
-            for c in r.items(data, "conditions")
-        ]
+        measured = []
+        for i, m in enumerate(r.items(data, "measured")):
+            w = f"measured[{i}]"
+            name = r.get(m, "name", w, str)
+            measured.append(Measured(name, r.expr(r.get(m, "expr", w), f"{w}.expr (measured {name!r})"), r.unit(m, "unit", w),
+                                     r.get(m, "description", w, str, "")))
+        conditions = []
+        for i, c in enumerate(r.items(data, "conditions")):
+            w = f"conditions[{i}]"
+            label = r.get(c, "label", w, str)
+            conditions.append(Condition(label, r.expr(r.get(c, "expr", w), f"{w}.expr (condition {label!r})"),
+                                        r.get(c, "description", w, str, "")))
         dissipators = []
-        for dd in r.items(data, "dissipators"):
-            label = r.get(dd, "label", "dissipators[]", str)
+        for i, dd in enumerate(r.items(data, "dissipators")):
+            w = f"dissipators[{i}]"
+            label = r.get(dd, "label", w, str)
             entries = {}
-            for key, text in r.get(dd, "entries", "dissipators[]", dict).items():
+            for key, text in r.get(dd, "entries", w, dict).items():
                 try:
-                    i, j = (int(a) for a in key.split(","))
+                    a, b = (int(v) for v in key.split(","))
                 except ValueError:
-                    raise r.fail(f"dissipator {label!r}: entry key {key!r} is not 'i,j'") from None
-                entries[(i, j)] = r.expr(text, f"dissipator {label!r} entry {key}")
+                    raise r.fail(f"{w}.entries: dissipator {label!r}: entry key {key[:20]!r} is not 'i,j'") from None
+                entries[(a, b)] = r.expr(text, f"{w}.entries[{key!r}] (dissipator {label!r})")
             dissipators.append((label, entries))
-        definitions = [
-            (r.expr(r.get(d, "symbol", "definitions[]"), "definition symbol"),
-             r.expr(r.get(d, "expr", "definitions[]"), f"definition {d.get('label')!r}"),
-             r.get(d, "label", "definitions[]", str))
-            for d in r.items(data, "definitions")
-        ]
+        definitions = []
+        for i, d in enumerate(r.items(data, "definitions")):
+            w = f"definitions[{i}]"
+            symbol = r.expr(r.get(d, "symbol", w), f"{w}.symbol")
+            if not isinstance(symbol, sp.Symbol):
+                raise r.fail(f"{w}.symbol is a {type(symbol).__name__}, not a symbol")
+            label = r.get(d, "label", w, str)
+            definitions.append((symbol, r.expr(r.get(d, "expr", w), f"{w}.expr (definition {label!r})"), label))
         name = r.get(data, "name", "file", str)
         description = r.get(data, "description", "file", str, default="")
-        structure = _unplain(r.get(data, "structure", "file", dict, default={}), r)
+        structure = _unplain(r.get(data, "structure", "file", dict, default={}), r, "structure")
     except InputDataError:
         raise
-    except (TypeError, ValueError, AttributeError) as exc:
-        raise r.fail(f"malformed entry: {exc}") from None
+    except (TypeError, ValueError, AttributeError) as exc:  # the constructors of StateInfo, Param, ... refusing a value
+        raise r.fail(f"malformed entry: {str(exc).splitlines()[0]}") from None
+    return dict(name=name, states=states, H=energy, J=matrices["J"], R=matrices["R"], G=matrices["G"], P=matrices["P"],
+                S=matrices["S"], N=matrices["N"], inputs=inputs, params=params, measured=measured,
+                conditions=conditions, dissipators=dissipators, definitions=definitions, description=description,
+                structure=structure)
+
+
+def system_from_dict(data: dict, build: Callable[..., Any], source: str = "<dict>"):
+    """Rebuild a system from the dictionary written by :func:`system_to_dict`.
+
+    Parameters
+    ----------
+    data : dict
+        The dictionary.
+    build : callable
+        The class to build (``PHSystem``), called with :func:`system_arguments`.
+    source : str
+        Where the dictionary comes from, said in errors.
+
+    Raises
+    ------
+    InputDataError
+        Naming ``source`` and the missing or malformed field, or listing the
+        problems the PHSystem constructor found.
+
+    Examples
+    --------
+    >>> from phs import PHSystem
+    >>> from systems.examples import duffing_oscillator
+    >>> s = duffing_oscillator()
+    >>> system_from_dict(system_to_dict(s), PHSystem).H == s.H
+    True
+    """
+    args = system_arguments(data, source)
     try:
-        return PHSystem(name, states, energy, matrices["J"], matrices["R"], matrices["G"], P=matrices["P"],
-                        S=matrices["S"], N=matrices["N"], inputs=inputs, params=params, measured=measured,
-                        conditions=conditions, dissipators=dissipators, definitions=definitions,
-                        description=description, structure=structure)
+        return build(**args)
     except PHSError as exc:
         raise InputDataError(f"cannot load system from {source!r}: the stored model is invalid", [str(exc)]) from None
 
 
-def load_system(path):
-    """Load a system saved with :func:`save_system` (or :meth:`PHSystem.save`).
+def load_system(path, build: Callable[..., Any]):
+    """Load a system saved with :func:`save_system` (:meth:`PHSystem.load` and :func:`phs.load` call this).
 
     Parameters
     ----------
     path : str or path-like
         A JSON file written by :func:`save_system`.
+    build : callable
+        The class to build (``PHSystem``).
 
     Returns
     -------
@@ -432,10 +433,11 @@ def load_system(path):
     Examples
     --------
     >>> import tempfile, os
+    >>> from phs import PHSystem
     >>> from systems.examples import rc_circuit
     >>> with tempfile.TemporaryDirectory() as d:
     ...     rc_circuit().save(os.path.join(d, "rc.json"))
-    ...     load_system(os.path.join(d, "rc.json")).state_names
+    ...     load_system(os.path.join(d, "rc.json"), PHSystem).state_names
     ['C.Q']
     """
     path = os.fspath(path)
@@ -452,4 +454,6 @@ def load_system(path):
         raise InputDataError(
             f"cannot load system from {path!r}: not valid JSON ({exc.msg} at line {exc.lineno}, column {exc.colno})"
         ) from None
-    return system_from_dict(data, source=path)
+    except (ValueError, RecursionError) as exc:  # an integer of too many digits, arrays nested too deeply
+        raise InputDataError(f"cannot load system from {path!r}: not readable JSON ({str(exc)[:100]})") from None
+    return system_from_dict(data, build, source=path)

@@ -15,6 +15,7 @@ Examples
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass
 from numbers import Real
@@ -24,8 +25,10 @@ import sympy as sp
 
 from phs.errors import InputDataError
 from phs.params import TIME
+from phs.safe_parse import Arithmetic, Refusal, evaluate
 
 t = TIME
+_MAX_SWITCHES = 1_000_000  # switching times of one signal over one simulated interval
 
 
 class Signal:
@@ -118,12 +121,7 @@ class Expression(Signal):
                     if isinstance(c, sp.core.relational.Relational):
                         args.append(c.lhs - c.rhs)
             for a in args:
-                try:
-                    for r in sp.solve(a, TIME):
-                        if r.is_real and t0 < float(r) < t1:
-                            pts.add(float(r))
-                except NotImplementedError:
-                    continue
+                pts.update(r for r in _zeros(a, t0, t1) if t0 < r < t1)
         return np.array(sorted(pts))
 
     def expr_on(self, a, b):
@@ -139,6 +137,26 @@ class Expression(Signal):
         if e.has(sp.Piecewise):
             e = e.replace(lambda n: isinstance(n, sp.Piecewise), lambda n: _pick(n, mid))
         return e
+
+
+_SCAN_POINTS = 4001  # grid of the numeric search for switching times
+
+
+def _zeros(a: sp.Expr, t0: float, t1: float) -> list[float]:
+    """Zeros of ``a(t)`` in (t0, t1): exact for a polynomial of degree <= 4 in t, else where a sampled
+    grid of the interval sees the sign change (refined by bisection), so the search is bounded in time."""
+    if a.is_polynomial(TIME) and sp.degree(a, TIME) <= 4:
+        return [float(r) for r in sp.solve(a, TIME) if r.is_real]
+    from scipy.optimize import brentq
+
+    f = sp.lambdify(TIME, a, "numpy")
+    grid = np.linspace(t0, t1, _SCAN_POINTS)
+    with np.errstate(all="ignore"):
+        v = np.broadcast_to(np.asarray(f(grid), dtype=complex).real, grid.shape)
+    out = [float(x) for x, y in zip(grid, v) if y == 0]
+    for i in np.flatnonzero(np.isfinite(v[:-1]) & np.isfinite(v[1:]) & (np.sign(v[:-1]) * np.sign(v[1:]) < 0)):
+        out.append(brentq(lambda x: float(np.real(f(x))), grid[i], grid[i + 1], xtol=1e-14))
+    return out
 
 
 def _pick(pw: sp.Piecewise, mid: float) -> sp.Expr:
@@ -208,6 +226,9 @@ class Periodic(Signal):
     def breakpoints(self, t0, t1):
         if t1 <= self.start:
             return np.empty(0)
+        if (t1 - max(t0, self.start)) / self.period > _MAX_SWITCHES / 2:
+            raise InputDataError(f"periodic signal: more than {_MAX_SWITCHES} switching times between t = {t0:g} and "
+                                 f"{t1:g} (period {self.period:g})")
         k0 = max(0, math.floor((max(t0, self.start) - self.start) / self.period) - 1)
         pts = []
         k = k0
@@ -282,6 +303,8 @@ def staircase(step_height: float, every: float, n_steps: int, start: float = 0.0
     >>> [float(s(x)) for x in (0.5, 1.5, 3.5, 5.5, 9.0)]
     [0.0, -1000.0, -2000.0, -3000.0, -3000.0]
     """
+    if not 0 <= n_steps <= _MAX_SWITCHES:
+        raise InputDataError(f"staircase: the number of steps must be between 0 and {_MAX_SWITCHES}, got {n_steps}")
     times = tuple(start + k * every for k in range(n_steps))
     levels = tuple(initial + (k + 1) * step_height for k in range(n_steps))
     return Piecewise(times, levels, float(initial))
@@ -373,61 +396,99 @@ _FUNCS = {"square": square, "step": step, "staircase": staircase, "sine": sine, 
 _MATH = {"sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "exp": sp.exp, "log": sp.log, "sqrt": sp.sqrt, "tanh": sp.tanh,
          "sinh": sp.sinh, "cosh": sp.cosh, "abs": sp.Abs, "Abs": sp.Abs, "sign": sp.sign, "Heaviside": sp.Heaviside,
          "atan": sp.atan, "asin": sp.asin, "acos": sp.acos}
+_MAX_INPUT_LENGTH = 2000
+
+
+class _InputArithmetic(Arithmetic):
+    """Values of an input expression: sympy expressions of ``t``, or signals built by ``square(...)`` etc."""
+
+    operators = frozenset({"+", "-", "*", "/", "**", "%"})
+
+    def __init__(self):
+        super().__init__({"t": TIME, "pi": sp.pi}, {**_MATH, **_FUNCS},
+                         hint=f" (allowed: t, pi, {', '.join(sorted(_MATH))}, {', '.join(_FUNCS)})")
+
+    def keywords(self, name):
+        return frozenset(inspect.signature(_FUNCS[name]).parameters) if name in _FUNCS else frozenset()
+
+    def call(self, name, args, kwargs):
+        if name not in _FUNCS:
+            if any(isinstance(a, Signal) for a in args):
+                raise Refusal(f"{name}() takes numbers or expressions of t, not a signal")
+            return super().call(name, args, kwargs)
+        values = [_constant(a, name) for a in args]
+        options = {k: v if isinstance(v, bool) else _constant(v, name) for k, v in kwargs.items()}
+        try:
+            return _FUNCS[name](*values, **options)
+        except (InputDataError, TypeError, ValueError, ArithmeticError) as exc:
+            raise Refusal(f"{name}(): {exc}") from None
+
+    def binary(self, op, a, b):
+        if not isinstance(a, Signal) and not isinstance(b, Signal):
+            return super().binary(op, a, b)
+        if op == "/" and not isinstance(b, Signal):
+            divisor = _constant(b, "a signal's divisor")
+            if divisor == 0:
+                raise Refusal("division by zero")
+            return as_signal(a) * (1.0 / divisor)
+        if op not in ("+", "-", "*"):
+            raise Refusal(f"signals can be added, subtracted, multiplied and divided by a number, not combined with {op}")
+        a, b = as_signal(a), as_signal(b)
+        return a + b if op == "+" else a - b if op == "-" else a * b
+
+
+def _shown(value) -> str:
+    text = str(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _constant(value, name: str) -> float | int:
+    """A finite float (an int for an integer) from a value of the expression that must be a number."""
+    if isinstance(value, Signal) or not isinstance(value, sp.Basic) or value.free_symbols:
+        raise Refusal(f"{name}() takes numbers, not {'a signal' if isinstance(value, Signal) else _shown(value)}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise Refusal(f"{_shown(value)} is not a real number") from None
+    if not math.isfinite(number):
+        raise Refusal(f"{_shown(value)} is not a finite number")
+    return int(value) if value.is_Integer else number
 
 
 def parse_expression(text: str) -> Signal:
     """Parse an input expression of ``t``; ``square(...)``, ``step(...)``, ``staircase(...)``,
     ``sine(...)``, ``chirp(...)`` build signals with breakpoints and may be scaled or added.
 
+    The text is read by :mod:`phs.safe_parse` (numbers, ``t``, ``pi``, ``+ - * / ** %``
+    and calls of the functions above; nothing is evaluated as Python), numbers must be
+    finite and exponents bounded.
+
     Raises
     ------
     InputDataError
-        Naming the expression when it cannot be read or uses unknown names.
+        Naming the expression when it cannot be read, uses unknown names, divides
+        by zero, or is not a finite real number.
 
     Examples
     --------
     >>> s = parse_expression("2500 + square(2500, 2)")
     >>> float(s(0.1)), float(s(0.3))
     (5000.0, 0.0)
+    >>> try:
+    ...     parse_expression("log(0)")
+    ... except InputDataError as err:
+    ...     print(err)
+    input expression 'log(0)': log(0) is not finite
     """
-    import ast
-
+    where = f"input expression {text!r}" if len(str(text)) <= 60 else "input expression"
+    value = evaluate(text, where, _InputArithmetic(), max_length=_MAX_INPUT_LENGTH)
+    if isinstance(value, Signal):
+        return value
+    if value.has(sp.I):
+        raise InputDataError(f"{where}: {_shown(value)} is not real")
+    if value.free_symbols:
+        return Expression(value)
     try:
-        tree = ast.parse(text.strip(), mode="eval")
-    except SyntaxError as exc:
-        raise InputDataError(f"cannot read input expression {text!r}: {exc.msg}") from None
-    allowed_nodes = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.Call, ast.Name, ast.Load, ast.Constant, ast.keyword,
-                     ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Pow, ast.USub, ast.UAdd, ast.Mod)
-    names = set(_FUNCS) | set(_MATH) | {"t", "pi"}
-    for n in ast.walk(tree):  # checked before anything is evaluated
-        if isinstance(n, ast.Attribute):
-            raise InputDataError(f"input expression {text!r}: attribute access is not allowed")
-        if not isinstance(n, allowed_nodes):
-            raise InputDataError(f"input expression {text!r}: {type(n).__name__} is not allowed")
-        if isinstance(n, ast.Name) and n.id not in names:
-            raise InputDataError(f"input expression {text!r}: unknown name {n.id!r} "
-                                 f"(allowed: t, pi, {', '.join(sorted(_MATH))}, {', '.join(_FUNCS)})")
-        if isinstance(n, ast.Constant) and not isinstance(n.value, (int, float)):
-            raise InputDataError(f"input expression {text!r}: only numbers are allowed as constants")
-    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUNCS]
-    if not calls:
-        try:
-            e = sp.sympify(text, locals={"t": TIME, "pi": sp.pi, **_MATH})
-        except (sp.SympifyError, SyntaxError, TypeError, ValueError) as exc:
-            raise InputDataError(f"cannot read input expression {text!r}: {exc}") from None
-        if e.free_symbols - {TIME}:
-            raise InputDataError(f"input expression {text!r}: unknown symbols {sorted(map(str, e.free_symbols - {TIME}))}")
-        if not e.free_symbols and not sp.Float(e).is_finite:
-            raise InputDataError(f"input expression {text!r} is not a finite number")
-        return as_signal(e)
-    env = {k: v for k, v in _FUNCS.items()}
-    env.update({"pi": math.pi, "__builtins__": {}})
-    for n in ast.walk(tree):
-        if isinstance(n, ast.Name) and n.id not in env:
-            raise InputDataError(f"input expression {text!r}: {n.id!r} cannot be combined with "
-                                 f"{', '.join(_FUNCS)} (use numbers and those functions)")
-    try:
-        val = eval(compile(tree, "<input>", "eval"), env)  # names restricted above
-    except (TypeError, ValueError, ZeroDivisionError, InputDataError) as exc:
-        raise InputDataError(f"cannot evaluate input expression {text!r}: {exc}") from None
-    return as_signal(val)
+        return Constant(float(_constant(value, "an input")))
+    except Refusal as exc:
+        raise InputDataError(f"{where}: {exc}") from None

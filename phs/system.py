@@ -19,6 +19,7 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import ModelError, ParameterError
+from phs.io import load_system, save_system
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
 
 _NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, "numpy"]
@@ -538,14 +539,10 @@ class PHSystem:
         return latex(self)
 
     def save(self, path) -> None:
-        """Save definition and parameter values to a JSON file (atomically)."""
-        from phs.io import save_system
-
+        """Save definition and parameter values to a JSON file (atomically); see :mod:`phs.io`."""
         save_system(self, path)
 
-    @staticmethod
-    def load(path) -> PHSystem:
-        """Load a system saved with :meth:`save`."""
-        from phs.io import load_system
-
-        return load_system(path)
+    @classmethod
+    def load(cls, path) -> PHSystem:
+        """Load a system saved with :meth:`save`; the file is read as data, never run (see :mod:`phs.io`)."""
+        return load_system(path, cls)

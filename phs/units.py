@@ -14,6 +14,7 @@ from fractions import Fraction
 import sympy as sp
 
 from phs.errors import UnitError
+from phs.safe_parse import Arithmetic, evaluate
 
 # exponents of (m, kg, s, A, K, mol, cd)
 _BASE = {
@@ -70,8 +71,69 @@ def _pow(a: Dim, k: Fraction) -> Dim:
     return tuple(x * k for x in a)
 
 
-def parse_unit(unit: str) -> Dim:
+class _UnitNames(Arithmetic):
+    """Products of powers of names and numbers; every name is a unit symbol, checked by :func:`parse_unit`."""
+
+    operators = frozenset({"*", "/", "**"})
+
+    def __init__(self):
+        super().__init__({}, exact=True)
+
+    def name(self, name: str):
+        """Any name is a unit symbol here."""
+        return sp.Symbol(name)
+
+
+_MAX_UNIT_LENGTH = 200
+
+
+def unit_expression(unit: str, where: str = "") -> sp.Expr:
+    """The unit string as a sympy product of powers of unit-name symbols, read by the safe parser.
+
+    Any name is accepted here (:func:`parse_unit` then checks it is a known
+    unit); anything but names, numbers, ``*``, ``/`` and ``**`` (or ``^``)
+    is refused, and nothing is evaluated.
+
+    Parameters
+    ----------
+    unit : str
+        The unit, e.g. ``"N*m/rad"``.
+    where : str, optional
+        Where the unit comes from (``"params[2].unit"``), said first in errors.
+
+    Raises
+    ------
+    UnitError
+        Naming ``where`` and the unit string, when the text is not a product
+        of powers of names.
+
+    Examples
+    --------
+    >>> unit_expression("kg*m^2/s")
+    kg*m**2/s
+    >>> try:
+    ...     unit_expression("__import__('os')", "params[2].unit")
+    ... except UnitError as err:
+    ...     print(err)
+    params[2].unit: unit "__import__('os')": name '__import__' is not allowed (names with '__' are reserved)
+    """
+    prefix = f"{where}: " if where else ""
+    if not isinstance(unit, str):
+        raise UnitError(f"{prefix}a unit must be text, not {type(unit).__name__}")
+    text = unit.replace("^", "**").replace("Ω", "Ohm").strip() or "1"
+    label = prefix + (f"unit {unit!r}" if len(unit) <= 60 else "a unit")
+    return evaluate(text, label, _UnitNames(), error=UnitError, max_length=_MAX_UNIT_LENGTH)
+
+
+def parse_unit(unit: str, where: str = "") -> Dim:
     """Dimension of a unit string as exponents of (m, kg, s, A, K, mol, cd).
+
+    Parameters
+    ----------
+    unit : str
+        A product of powers of unit names (``"N*m/rad"``, ``"kg*m**2"``, ``"m^2"``).
+    where : str, optional
+        Where the unit comes from, said first in errors.
 
     Raises
     ------
@@ -85,15 +147,16 @@ def parse_unit(unit: str) -> Dim:
     >>> format_dim(parse_unit("V*A"))
     'kg*m**2/s**3'
     """
-    key = unit.strip() or "1"
+    key = (unit.strip() or "1") if isinstance(unit, str) else None
     if key in _UNIT_CACHE:
         return _UNIT_CACHE[key]
-    names = {n: sp.Symbol(n) for n in list(_BASE) + list(_DERIVED)}
+    expr = unit_expression(unit, where)
     try:
-        expr = sp.sympify(key.replace("^", "**").replace("Ω", "Ohm"), locals=names)
-    except (sp.SympifyError, SyntaxError, TypeError) as exc:
-        raise UnitError(f"cannot read unit {unit!r}: {exc}") from None
-    dim = _dim_of_unit_expr(expr, unit)
+        dim = _dim_of_unit_expr(expr, unit)
+    except UnitError as exc:
+        if not where:
+            raise
+        raise UnitError(f"{where}: {exc}") from None
     _UNIT_CACHE[key] = dim
     return dim
 
@@ -114,7 +177,7 @@ def _dim_of_unit_expr(expr: sp.Expr, unit: str) -> Dim:
             d = _mul(d, _dim_of_unit_expr(a, unit))
         return d
     if expr.is_Pow and expr.exp.is_Rational:
-        return _pow(_dim_of_unit_expr(expr.base, unit), Fraction(str(expr.exp)))
+        return _pow(_dim_of_unit_expr(expr.base, unit), Fraction(int(expr.exp.p), int(expr.exp.q)))
     raise UnitError(f"cannot read unit {unit!r}: only products of powers of unit names are allowed")
 
 
@@ -226,7 +289,7 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim]) -> Dim:
         cache[e] = d
         return d
 
-    return rec(sp.sympify(expr))
+    return rec(sp.sympify(expr, strict=True))  # a sympy expression, never text
 
 
 JOULE = parse_unit("J")

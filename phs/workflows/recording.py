@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phs.errors import InputDataError
+from phs.errors import InputDataError, UnitError
 from phs.units import parse_unit
 from phs.workflows.inputs import _column, _read_rows, check_time
 
@@ -53,8 +53,8 @@ def unit_factor(from_unit: str, to_unit: str) -> float:
     fu = from_unit.replace("deg", "rad") if from_unit == "deg" else from_unit
     try:
         same = parse_unit(_strip_prefix(fu)) == parse_unit(_strip_prefix(to_unit))
-    except Exception:  # noqa: BLE001 - reported below with the units named
-        same = False
+    except UnitError as exc:  # an unknown name, or text that is not a unit (read by phs.safe_parse)
+        raise InputDataError(f"cannot convert {from_unit!r} to {to_unit!r}: {exc}") from None
     if not same:
         raise InputDataError(f"cannot convert {from_unit!r} to {to_unit!r}: different dimensions")
     return si(from_unit) / si(to_unit)

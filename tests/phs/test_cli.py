@@ -224,3 +224,15 @@ def test_read_input_csv_rows_and_signals(tmp_path):
     path.write_text("t,F\n0,0\n\n1,x\n")
     with pytest.raises(InputDataError, match=r"row 4, column 'F'"):  # spreadsheet rows count the blank line
         read_input_csv(path, mass_spring_damper())
+
+
+
+@pytest.mark.parametrize(("text", "culprit"), [
+    ("9**9**9", "exponent"), ("step(9**9**9)", "exponent"), ("1/0", "division by zero"), ("sin", "'sin' is a function"),
+    ("log(0)", "not finite"), ("1e400", "not a finite"), ("__import__('os').system('true')", "'__import__'"),
+])
+def test_unsafe_or_undefined_input_expressions_are_one_error_line(tmp_path, capsys, text, culprit):
+    assert simulate(tmp_path, "--input", f"U={text}") == 2
+    err = capsys.readouterr().err
+    assert err.startswith("phs: error: --input U: ") and err.count("\n") == 1 and culprit in err, err
+    assert os.listdir(tmp_path) == []

@@ -92,3 +92,13 @@ def test_check_reports_a_unit_mismatch_naming_the_component():
 
 def test_check_passes_when_units_agree(rc):
     assert rc.check(samples=10)["units"].verdict == "pass"
+
+
+def test_units_are_read_by_the_safe_parser():
+    assert parse_unit("m**2.5/s")[0] == Fraction(5, 2)  # a decimal exponent is read exactly
+    assert parse_unit("m^(1/2)")[0] == Fraction(1, 2)
+    for bad, culprit in [("__import__('os')", "'__import__'"), ("m**1001", "exponent 1001"), ("m**(9**9**9)", "exponent"),
+                         ("'m'", "string constants"), ("m." + "s", "attribute access"), ("m" * 201, "longer than 200")]:
+        with pytest.raises(UnitError, match=culprit) as err:
+            parse_unit(bad, "states[0].unit")
+        assert str(err.value).startswith("states[0].unit: ")
