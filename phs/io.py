@@ -62,7 +62,7 @@ def system_to_dict(system) -> dict[str, Any]:
         "description": s.description,
         "states": [
             {"name": x.name, "unit": x.unit, "range": list(x.range), "description": x.description, "kind": x.kind,
-             "scale": x.scale, "owner": x.owner}
+             "scale": x.scale, "owner": x.owner, "rest": x.rest}
             for x in s.states
         ],
         "inputs": [
@@ -340,7 +340,7 @@ def system_from_dict(data: dict, source: str = "<dict>"):
     try:
         states = [
             StateInfo(r.get(x, "name", "states[]", str), x.get("unit", "1"), _rng(x.get("range", (-1.0, 1.0))),
-                      x.get("description", ""), x.get("kind", "C"), x.get("scale"), x.get("owner", ""))
+                      x.get("description", ""), x.get("kind", "C"), x.get("scale"), x.get("owner", ""), x.get("rest"))
             for x in r.items(data, "states")
         ]
         inputs = [

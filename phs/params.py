@@ -238,12 +238,16 @@ class StateInfo:
 
     ``kind`` is ``"C"`` for displacement-like states (charge, angle, length:
     the port flow is the state's rate) and ``"I"`` for momentum-like states
-    (the port effort is the state's rate).
+    (the port effort is the state's rate).  ``rest`` is the state's value at
+    rest (a spring's rest length), the default initial state of a simulation;
+    without it the default is 0 moved into the range.
 
     Examples
     --------
     >>> StateInfo("seg1.theta", "rad", (-0.4, 0.4), scale=0.2).typical
     0.2
+    >>> StateInfo("l", "m", (0.01, 0.02)).initial, StateInfo("l", "m", (0.01, 0.02), rest=0.015).initial
+    (0.01, 0.015)
     """
 
     name: str
@@ -253,10 +257,18 @@ class StateInfo:
     kind: str = "C"
     scale: float | None = None
     owner: str = ""
+    rest: float | None = None
 
     @property
     def symbol(self) -> sp.Symbol:
         return state_symbol(self.name)
+
+    @property
+    def initial(self) -> float:
+        """The default initial value: :attr:`rest` when declared, else 0 moved into the range."""
+        if self.rest is not None:
+            return float(self.rest)
+        return min(max(0.0, self.range[0]), self.range[1])
 
     @property
     def typical(self) -> float:
