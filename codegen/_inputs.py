@@ -77,7 +77,7 @@ def input_signals(system, u, t) -> list[Signal]:
 
 
 def initial_state(system, x0) -> np.ndarray:
-    """Initial state vector of ``system`` from a dict by name or an array (default zero clipped into the ranges).
+    """Initial state vector of ``system`` from a dict by name or an array (default: each state at rest, ``StateInfo.initial``).
 
     Raises
     ------
@@ -91,7 +91,7 @@ def initial_state(system, x0) -> np.ndarray:
     array([0. , 0.5])
     """
     s = system
-    base = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in s.states])
+    base = np.array([st.initial for st in s.states])
     if x0 is None:
         return base
     if isinstance(x0, dict):

@@ -15,8 +15,12 @@ class SimulationResult:
     """Trajectory of a system on a time grid, indexed by signal name.
 
     ``res["seg2.theta"]`` gives a state, input, port output (``"U.i"``),
-    measured output, energy term or one of ``"H"``, ``"dissipated"`` (power),
-    ``"supplied"`` (power ``y^T u``), ``"dHdt"``.
+    measured output, energy term or one of ``"H"`` [J], ``"dissipated"`` (the
+    dissipated power [W]), ``"supplied"`` (the supplied power ``y^T u`` [W]),
+    ``"dHdt"`` [W].  Energies over time are ``E_supplied`` and ``E_dissipated``
+    [J] (:attr:`quadratures` of a CVODES run, or :meth:`energy_accounts`).
+    :meth:`unit` gives each signal's unit; :meth:`to_csv` writes headers
+    ``name [unit]``.
 
     Parameters
     ----------
@@ -36,6 +40,8 @@ class SimulationResult:
     >>> res = simulate(mass_spring_damper(), np.linspace(0, 2, 21), u={"F": 1.0})
     >>> res.columns[:3], res["position"].shape
     (['m.p', 'k.l', 'F'], (21,))
+    >>> res.unit("m.p"), res.unit("H"), res.unit("dissipated")
+    ('kg*m/s', 'J', 'W')
     """
 
     def __init__(self, system, t, x, u, p, stats: dict | None = None):
@@ -71,17 +77,42 @@ class SimulationResult:
 
     @property
     def dissipated(self) -> np.ndarray:
-        """Dissipated power z^T [[R, P], [P^T, S]] z."""
+        """Dissipated power z^T [[R, P], [P^T, S]] z [W]."""
         return self._power[1]
 
     @property
     def supplied(self) -> np.ndarray:
-        """Supplied power y^T u."""
+        """Supplied power y^T u [W]."""
         return self._power[2]
 
     @property
     def dHdt(self) -> np.ndarray:
+        """Rate of change of the stored energy dH/dt [W]."""
         return self._power[0]
+
+    def energy_accounts(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(E_supplied, E_dissipated)``: supplied and dissipated energy since t[0] [J].
+
+        The integrator's own quadratures when the run has them (CVODES), otherwise the
+        trapezoidal rule on the grid applied to :attr:`supplied` and :attr:`dissipated`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from systems.examples import rc_circuit
+        >>> E_in, E_out = simulate(rc_circuit(), np.linspace(0, 5e-3, 51), u={"U": 1.0}).energy_accounts()
+        >>> float(E_in[0]), bool(E_in[-1] > E_out[-1] > 0)
+        (0.0, True)
+        """
+        q = self.quadratures
+        if "E_supplied" in q and "E_dissipated" in q:
+            return np.asarray(q["E_supplied"]), np.asarray(q["E_dissipated"])
+
+        def cumulative(f):
+            return np.concatenate([[0.0], np.cumsum(np.diff(self.t) * (f[1:] + f[:-1]) / 2)])
+
+        return cumulative(self.supplied), cumulative(self.dissipated)
 
     @cached_property
     def y(self) -> np.ndarray:
@@ -107,13 +138,11 @@ class SimulationResult:
         otherwise the trapezoidal rule on the grid.
         """
         dH = self.H - self.H[0]
-        q = self.quadratures
-        if q:
-            integral = q["E_supplied"] - q["E_dissipated"]
-            scale = np.max(np.abs(q["E_supplied"])) + np.max(np.abs(q["E_dissipated"]))
+        E_supplied, E_dissipated = self.energy_accounts()
+        integral = E_supplied - E_dissipated
+        if self.quadratures:
+            scale = np.max(np.abs(E_supplied)) + np.max(np.abs(E_dissipated))
         else:
-            net = self.supplied - self.dissipated
-            integral = np.concatenate([[0.0], np.cumsum(np.diff(self.t) * (net[1:] + net[:-1]) / 2)])
             scale = np.trapezoid(np.abs(self.supplied) + np.abs(self.dissipated), self.t)
         scale = max(scale, np.max(np.abs(dH)), 1e-300)
         return float(np.max(np.abs(dH - integral)) / scale)
@@ -135,6 +164,26 @@ class SimulationResult:
         return signal(s, name, x=self.x, u=self.u, y=lambda: self.y, measured=lambda: self.measured, extra=extra,
                       known=self.columns, where=f" in the result of {s.name!r}")
 
+    def unit(self, name: str) -> str:
+        """Unit of the signal ``name`` (``"s"`` for the time ``t``).
+
+        Raises
+        ------
+        KeyError
+            When ``name`` is no signal of the result.
+        """
+        s = self.system
+        units = {"t": "s", "H": "J", "dissipated": "W", "supplied": "W", "dHdt": "W"}
+        units.update({t.label: "J" for t in s.energy_terms})
+        units.update({label: "W" for label, _ in s.dissipators})
+        units.update({st.name: st.unit for st in s.states})
+        units.update({i.name: i.unit for i in s.inputs})
+        units.update({i.output: i.output_unit for i in s.inputs})
+        units.update({m.name: m.unit for m in s.measured})
+        if name not in units:
+            raise KeyError(f"no signal {name!r} in the result of {s.name!r}; known: {', '.join(['t', *self.columns])}")
+        return units[name]
+
     def table(self) -> tuple[list[str], np.ndarray]:
         """Header (with ``t`` first) and the (nt, 1 + ncolumns) array of every signal."""
         cols = self.columns
@@ -142,9 +191,13 @@ class SimulationResult:
         return ["t"] + cols, data
 
     def to_csv(self, path) -> None:
-        """Write every signal to CSV atomically (a temporary file renamed into place)."""
+        """Write every signal to CSV atomically (a temporary file renamed into place).
+
+        The header names each column with its unit, ``t [s],C.Q [C],...``;
+        :meth:`phs.workflows.recording.Recording.from_csv` reads such headers by name.
+        """
         header, data = self.table()
-        write_csv_atomic(path, header, data)
+        write_csv_atomic(path, [f"{name} [{self.unit(name)}]" for name in header], data)
 
     def __repr__(self) -> str:
         return f"SimulationResult({self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g})"

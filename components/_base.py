@@ -18,14 +18,19 @@ class QuadraticStorage(Component):
     state_unit = "1"
     state_description = ""
 
-    def __init__(self, name: str, *, state: str | None = None, range=None, scale=None):
+    def __init__(self, name: str, *, state: str | None = None, range=None, scale=None, rest=None):
         super().__init__(name)
         self._state_name = state
         self._range = range
         self._scale = scale
+        self._rest = rest
 
     def default_range(self, values: dict) -> tuple[float, float]:
         return (-1.0, 1.0)
+
+    def default_rest(self, values: dict) -> float | None:
+        """The state's value at rest (the default initial state), or None for 0 moved into the range."""
+        return None
 
     def energy(self, x: sp.Symbol) -> sp.Expr:  # pragma: no cover - abstract in practice
         raise NotImplementedError
@@ -43,8 +48,9 @@ class QuadraticStorage(Component):
             values[key] = decl[0].value if decl else None
         self._syms = syms
         rng = self._range if self._range is not None else self.default_range(values)
+        rest = self._rest if self._rest is not None else self.default_rest(values)
         st = self._state(self.state_local, self._state_name, self.state_unit, rng, self.state_description,
-                         self.kind, self.domain, self._scale)
+                         self.kind, self.domain, self._scale, rest)
         e = self.energy(st.state.symbol)
         return Piece(self.name, storages=(st,), energy=(EnergyTerm(self.name, e),), ports=(st.port,), params=tuple(params))
 

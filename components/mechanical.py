@@ -113,6 +113,10 @@ class LinearSpring(QuadraticStorage):
         L0 = values.get("L0") or 0.0
         return (L0 - max(L0, 0.1), L0 + max(L0, 0.1))
 
+    def default_rest(self, values):
+        """At rest the spring has its rest length ``L0`` (when ``L0`` has a value)."""
+        return values.get("L0")
+
     def energy(self, x):
         L0 = self._syms.get("L0", 0)
         return self._syms["K"] * (x - L0) ** 2 / 2

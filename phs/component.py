@@ -207,9 +207,11 @@ class Component(ABC):
             f"expression of parameters, not {type(value).__name__}"
         )
 
-    def _state(self, local: str, given: str | None, unit: str, range, description: str, kind: str, domain: str, scale=None) -> Storage:
+    def _state(self, local: str, given: str | None, unit: str, range, description: str, kind: str, domain: str, scale=None,
+               rest=None) -> Storage:
         name = check_name(given or f"{self.name}.{local}", "state")
-        info = StateInfo(name, unit, tuple(float(r) for r in range), description, kind, scale, self.name)
+        rest = None if rest is None else float(rest)
+        info = StateInfo(name, unit, tuple(float(r) for r in range), description, kind, scale, self.name, rest)
         return Storage(info, make_port(self.name, local, domain))
 
     def _port(self, local: str, domain: str, supplies: bool = False) -> Port:

@@ -130,7 +130,7 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
     """
     names = system.state_names
     s = np.array([st.typical for st in system.states])
-    base = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in system.states])
+    base = np.array([st.initial for st in system.states])
     xs = _vector(system, x0, names, "state x0", base)
     uv = _vector(system, u, system.input_names, "input u", np.zeros(len(system.inputs)))
     p = system.param_vector(params, signs=signs)

@@ -66,7 +66,7 @@ def system_to_dict(system) -> dict[str, Any]:
         "description": s.description,
         "states": [
             {"name": x.name, "unit": x.unit, "range": list(x.range), "description": x.description, "kind": x.kind,
-             "scale": x.scale, "owner": x.owner}
+             "scale": x.scale, "owner": x.owner, "rest": x.rest}
             for x in s.states
         ],
         "inputs": [
@@ -307,7 +307,8 @@ def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
             w = f"states[{i}]"
             states.append(StateInfo(r.get(x, "name", w, str), r.unit(x, "unit", w), r.range(x, "range", w, (-1.0, 1.0)),
                                     r.get(x, "description", w, str, ""), r.get(x, "kind", w, str, "C"),
-                                    r.number(x, "scale", w, None), r.get(x, "owner", w, str, "")))
+                                    r.number(x, "scale", w, None), r.get(x, "owner", w, str, ""),
+                                    r.number(x, "rest", w, None)))
         inputs = []
         for i, u in enumerate(r.items(data, "inputs")):
             w = f"inputs[{i}]"

@@ -142,6 +142,57 @@ class Param:
         """The sympy symbol of this parameter."""
         return param_symbol(self.name, bool(self.positive))
 
+    # Arithmetic acts on the symbol, so ``eps * A / (g0 - x)`` may be written with the Params
+    # themselves; the expression refers to the symbols only, so the Params are still declared
+    # where the model is built (``interconnect(params=[...])``).
+    def _sympy_(self) -> sp.Symbol:
+        """The symbol, for ``sympy.sympify`` and sympy functions (``sp.sqrt(k)``).
+
+        Examples
+        --------
+        >>> import sympy as sp
+        >>> k, m = Param("k", 50.0, "N/m"), Param("m", 1e-3, "kg")
+        >>> sp.sqrt(k / m), 2 * k - m
+        (sqrt(k)/sqrt(m), 2*k - m)
+        """
+        return self.symbol
+
+    def __add__(self, other):
+        return self.symbol + _operand(other)
+
+    def __radd__(self, other):
+        return _operand(other) + self.symbol
+
+    def __sub__(self, other):
+        return self.symbol - _operand(other)
+
+    def __rsub__(self, other):
+        return _operand(other) - self.symbol
+
+    def __mul__(self, other):
+        return self.symbol * _operand(other)
+
+    def __rmul__(self, other):
+        return _operand(other) * self.symbol
+
+    def __truediv__(self, other):
+        return self.symbol / _operand(other)
+
+    def __rtruediv__(self, other):
+        return _operand(other) / self.symbol
+
+    def __pow__(self, other):
+        return self.symbol ** _operand(other)
+
+    def __rpow__(self, other):
+        return _operand(other) ** self.symbol
+
+    def __neg__(self):
+        return -self.symbol
+
+    def __pos__(self):
+        return self.symbol
+
     def with_value(self, value: float) -> Param:
         """Copy with another value.
 
@@ -155,6 +206,11 @@ class Param:
     def renamed(self, name: str) -> Param:
         """Copy under another name (used to untie a shared parameter)."""
         return Param(name, self.value, self.unit, self.description, self.range, self.positive)
+
+
+def _operand(other):
+    """The other operand of a :class:`Param`'s arithmetic: a Param's symbol, anything else as is."""
+    return other.symbol if isinstance(other, Param) else other
 
 
 def param_symbol(name: str, positive: bool) -> sp.Symbol:
@@ -182,12 +238,16 @@ class StateInfo:
 
     ``kind`` is ``"C"`` for displacement-like states (charge, angle, length:
     the port flow is the state's rate) and ``"I"`` for momentum-like states
-    (the port effort is the state's rate).
+    (the port effort is the state's rate).  ``rest`` is the state's value at
+    rest (a spring's rest length), the default initial state of a simulation;
+    without it the default is 0 moved into the range.
 
     Examples
     --------
     >>> StateInfo("seg1.theta", "rad", (-0.4, 0.4), scale=0.2).typical
     0.2
+    >>> StateInfo("l", "m", (0.01, 0.02)).initial, StateInfo("l", "m", (0.01, 0.02), rest=0.015).initial
+    (0.01, 0.015)
     """
 
     name: str
@@ -197,10 +257,18 @@ class StateInfo:
     kind: str = "C"
     scale: float | None = None
     owner: str = ""
+    rest: float | None = None
 
     @property
     def symbol(self) -> sp.Symbol:
         return state_symbol(self.name)
+
+    @property
+    def initial(self) -> float:
+        """The default initial value: :attr:`rest` when declared, else 0 moved into the range."""
+        if self.rest is not None:
+            return float(self.rest)
+        return min(max(0.0, self.range[0]), self.range[1])
 
     @property
     def typical(self) -> float:

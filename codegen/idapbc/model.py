@@ -205,7 +205,7 @@ def state_vector(system: PHSystem, x0=None, what: str = "x0", ignore=()) -> np.n
     >>> state_vector(mass_spring_damper(), {"k.l": 0.5})
     array([0. , 0.5])
     """
-    base = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in system.states])
+    base = np.array([st.initial for st in system.states])
     if x0 is None:
         return base
     if isinstance(x0, dict):

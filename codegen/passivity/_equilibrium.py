@@ -37,7 +37,7 @@ def _equilibrium_point(system, model: _Model, x_eq, u_eq, p, params, x0):
     if x_eq is None:
         eq = equilibrium(system, u=dict(zip(inames, uvec)), x0=x0, params=params, signs=False)  # the what-if
         return eq.x, uvec, f"equilibrium solved for u = {_fmt_point(dict(zip(inames, uvec))) or 'none'}"
-    x = np.array([min(max(0.0, st.range[0]), st.range[1]) for st in system.states])
+    x = np.array([st.initial for st in system.states])
     if isinstance(x_eq, dict):
         for k, v in x_eq.items():
             if k not in names:

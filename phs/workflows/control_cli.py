@@ -10,8 +10,10 @@ solves the matching equations, prints the design and its certificates
 (:mod:`codegen.idapbc`), and optionally simulates the closed loop (``--t-end``; the plant is the full model,
 with ``--plant-param`` overrides for a plant/controller mismatch), exports the law to C (``--export-c``) and
 writes a report directory (``controller.txt``, ``certificates.json``, ``closed_loop.png``, ``closed_loop.csv``).
-Exit status: 0 when every certificate passed, 1 when one failed, 2 on an error (an unreachable target
-included); nothing is written on an error.
+Exit status: 0 when every certificate passed and, with ``--t-end``, every target is within 1 % of its value
+at the end of the simulated time; 1 when a certificate failed or a target was not reached in the simulated
+time (the summary line of that target says ``NOT REACHED``); 2 on an error (an unreachable target included);
+nothing is written on an error.
 
 Examples
 --------
@@ -57,8 +59,10 @@ def add_subcommand(sub) -> None:
         description="Design an IDA-PBC controller for MODEL that holds the targets (states or measured outputs), "
                     "print the assigned equilibrium, the solved matching equations and the certificates (matching "
                     "residual, J_d skew, R_d PSD, critical point, Hessian, closed-loop eigenvalues, region of "
-                    "attraction, closed-loop simulations).  Exit status 0: all certificates passed, 1: one failed, "
-                    "2: error (an unreachable target included).")
+                    "attraction, closed-loop simulations).  Exit status 0: all certificates passed and (with --t-end) every "
+                    "target within 1 % of its value at the end of the simulated time; 1: a certificate failed or a "
+                    "target was not reached in the simulated time (the summary says which); 2: error (an unreachable "
+                    "target included).")
     _add_model_options(p)
     p.add_argument("--target", action="append", default=[], required=True, metavar="NAME=VALUE",
                    help="value to hold a state or measured output at (one per controlled input)")
@@ -117,6 +121,9 @@ def _check_dir(option: str, path: str | None) -> None:
 def run_control(args: argparse.Namespace) -> int:
     """Run ``phs control`` with parsed arguments; returns the exit code (0, 1; errors raise).
 
+    1 when a certificate failed, or when the closed-loop simulation (``--t-end``) ends with a target
+    not within 1 % of its value: the summary then says so in words.
+
     Everything (design, certificates, simulation, figure, C sources, JSON) is computed before the first
     file is written.
     """
@@ -147,6 +154,7 @@ def run_control(args: argparse.Namespace) -> int:
     report = ctrl.certify(rays=args.rays, simulations=args.simulations)
     text = ctrl.summary() + "\n" + report.text()
     res = None
+    unreached: list[str] = []
     if args.t_end is not None:
         dt = args.dt or args.t_end / 1000
         t = np.arange(0.0, args.t_end + dt / 2, dt)
@@ -156,8 +164,14 @@ def run_control(args: argparse.Namespace) -> int:
                                                       if plant_params else "") + f", {args.t_end:g} s:"]
         for tg in ctrl.targets:
             e = res.error(tg.name)
-            lines.append(f"  {tg.name}: final {res[tg.name][-1]:.6g} {tg.unit} (error {100 * e[-1]:+.4f} %), "
-                         f"within 1 % after {res.settling_time(0.01, tg.name):.4g} s")
+            settled = res.settling_time(0.01, tg.name)
+            line = f"  {tg.name}: final {res[tg.name][-1]:.6g} {tg.unit} (error {100 * e[-1]:+.4f} %), "
+            if math.isfinite(settled):
+                lines.append(line + f"within 1 % after {settled:.4g} s")
+            else:
+                unreached.append(tg.name)
+                lines.append(line + f"NOT REACHED: not within 1 % of the target {tg.value:g} {tg.unit} by the end "
+                                    f"of the simulated {args.t_end:g} s (simulate longer with --t-end)")
         for nm, info in res.info["input_ranges"].items():
             lines.append(f"  {nm} from {info['min']:.6g} to {info['max']:.6g}"
                          + (" - OUTSIDE its range" if info["exceeded"] else ""))
@@ -192,6 +206,7 @@ def run_control(args: argparse.Namespace) -> int:
                 "t_end": float(res.t[-1]), "plant_params": plant_params,
                 "final": {tg.name: float(res[tg.name][-1]) for tg in ctrl.targets},
                 "settling_time_1pct": {tg.name: res.settling_time(0.01, tg.name) for tg in ctrl.targets},
+                "reached": {tg.name: tg.name not in unreached for tg in ctrl.targets},
                 "max_increase_H": res.max_increase("H_cl"), "inputs": res.info["input_ranges"]}
         document = json.dumps(_finite_or_none(document), indent=1, allow_nan=False) + "\n"
     print(text)
@@ -205,7 +220,7 @@ def run_control(args: argparse.Namespace) -> int:
             write_atomic(os.path.join(args.export_c, name), data)
     if document is not None:
         write_atomic(args.json, document)
-    return 0 if report.passed else 1
+    return 0 if report.passed and not unreached else 1
 
 
 def _plant_x0(ctrl, system, x0: dict):

@@ -8,6 +8,7 @@ file, the column and the row (spreadsheet numbering: the header is row 1).
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,6 +16,8 @@ import numpy as np
 from phs.errors import InputDataError, UnitError
 from phs.units import parse_unit
 from phs.workflows.inputs import _column, _read_rows, check_time
+
+_HEADER_UNIT = re.compile(r"(.*\S)\s*\[([^\[\]]+)\]")
 
 # SI multipliers of the unit names a recording may use (dimensions are checked separately)
 _PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1e-9, "c": 1e-2}
@@ -123,6 +126,10 @@ class Recording:
                  columns=None) -> Recording:
         """Read a CSV file with a header row.
 
+        A header cell ``name [unit]`` (as :meth:`codegen.results.SimulationResult.to_csv` writes
+        them) names the column ``name``, and ``unit`` becomes the signal's unit unless the column
+        is scaled or ``units`` says otherwise.
+
         Parameters
         ----------
         path : str or path-like
@@ -161,6 +168,7 @@ class Recording:
         """
         path = os.fspath(path)
         header, rows = _read_rows(path)
+        header, file_units = _names_and_units(header, path)
         if time_column not in header:
             raise InputDataError(f"{path}: no time column {time_column!r} (columns: {', '.join(header)})")
         mapping = dict(mapping or {})
@@ -186,7 +194,8 @@ class Recording:
         unknown_scales = [c for c in scales if c not in wanted]
         if unknown_scales:
             raise InputDataError(f"{path}: scales given for columns not read: {unknown_scales}")
-        rec = cls(t, signals, path, dict(units or {}))
+        read_units = {mapping.get(c, c): file_units[c] for c in wanted if c in file_units and c not in scales}
+        rec = cls(t, signals, path, {**read_units, **dict(units or {})})
         return rec._resampled(resample) if resample else rec._checked_uniform()
 
     @classmethod
@@ -278,3 +287,22 @@ class Recording:
                                  f"{system.name!r} ({', '.join(system.measured_names)})")
         return system.input_names, outs
 
+
+def _names_and_units(header: list[str], path: str) -> tuple[list[str], dict[str, str]]:
+    """Column names without a trailing `` [unit]`` (as ``phs simulate`` writes them), and those units.
+
+    Examples
+    --------
+    >>> _names_and_units(["t [s]", "C.Q [C]", "volts"], "r.csv")
+    (['t', 'C.Q', 'volts'], {'t': 's', 'C.Q': 'C'})
+    """
+    names, units = [], {}
+    for cell in header:
+        m = _HEADER_UNIT.fullmatch(cell)
+        name = m.group(1).strip() if m else cell
+        if m:
+            units[name] = m.group(2).strip()
+        if name in names:
+            raise InputDataError(f"{path}: column {name!r} appears twice in the header")
+        names.append(name)
+    return names, units

@@ -1,4 +1,4 @@
-"""``phs simulate``: simulate a model and write its signals to CSV.
+"""``phs simulate``: simulate a model and write its signals to CSV and/or a figure.
 
 Examples
 --------
@@ -36,8 +36,9 @@ def add_subcommand(sub) -> None:
     >>> parser.parse_args(["simulate", "m:f", "--t-end", "1", "--dt", "0.1", "--out", "r.csv"]).dt
     0.1
     """
-    p = sub.add_parser("simulate", help="simulate a model and write its signals to CSV",
-                       description="Simulate MODEL on the grid 0, DT, ..., T and write every signal to --out.")
+    p = sub.add_parser("simulate", help="simulate a model and write its signals to CSV and/or a figure",
+                       description="Simulate MODEL on the grid 0, DT, ..., T and write every signal to --out "
+                                   "(CSV, headers 'name [unit]') and/or a figure to --plot; at least one of them.")
     _add_model_options(p)
     p.add_argument("--t-end", required=True, type=_positive("--t-end"), metavar="T", help="final time [s]")
     p.add_argument("--dt", required=True, type=_positive("--dt"), metavar="DT", help="output step [s]")
@@ -47,7 +48,7 @@ def add_subcommand(sub) -> None:
     p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
     p.add_argument("--rtol", type=_positive("--rtol"), default=1e-8, help="relative tolerance (default 1e-8)")
     p.add_argument("--atol", type=_positive("--atol"), default=1e-8, help="absolute tolerance (default 1e-8)")
-    p.add_argument("--out", required=True, metavar="FILE", help="CSV file of every signal")
+    p.add_argument("--out", metavar="FILE", help="CSV file of every signal (headers 'name [unit]')")
     p.add_argument("--plot", metavar="FILE", help="PNG figure of states, measured outputs and energy")
     p.set_defaults(run=run_simulate)
 
@@ -57,7 +58,10 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     Every check runs and every output (CSV table, figure, summary) is
     prepared before the first file is written, so an error writes nothing.
+    On success one line on standard output says what was written.
     """
+    if args.out is None and args.plot is None:
+        raise InputDataError("nothing to write: give --out FILE.csv (every signal), --plot FILE.png (a figure), or both")
     _check_writable(args.out, args.plot, args.json)
     if args.dt > args.t_end:
         raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
@@ -78,24 +82,15 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     png = _figure_png(res) if args.plot else None
     summary = _summary(args, res, runtime) if args.json else None
-    res.to_csv(args.out)
+    if args.out is not None:
+        res.to_csv(args.out)
     if png is not None:
         write_atomic(args.plot, png)
     if summary is not None:
         write_atomic(args.json, json.dumps(summary, indent=1) + "\n")
+    written = ", ".join(p for p in (args.out, args.plot, args.json) if p is not None)
+    print(f"simulated {system.name!r}: {len(res.t)} samples to t = {res.t[-1]:g} s; wrote {written}")
     return 0
-
-
-def _energy_accounts(res) -> tuple[np.ndarray, np.ndarray]:
-    """Cumulative supplied and dissipated energy (integrator quadratures when available)."""
-    q = getattr(res, "quadratures", None) or {}
-    if "E_supplied" in q and "E_dissipated" in q:
-        return np.asarray(q["E_supplied"]), np.asarray(q["E_dissipated"])
-
-    def cumtrapz(f):
-        return np.concatenate([[0.0], np.cumsum(np.diff(res.t) * (f[1:] + f[:-1]) / 2)])
-
-    return cumtrapz(res.supplied), cumtrapz(res.dissipated)
 
 
 def _figure_png(res) -> bytes:
@@ -104,7 +99,8 @@ def _figure_png(res) -> bytes:
     from matplotlib.figure import Figure
 
     s = res.system
-    panels = ["states"] + (["measured"] if s.measured else []) + ["energy"]
+    measured_units = list(dict.fromkeys(mo.unit for mo in s.measured))   # one panel per unit
+    panels = ["states"] + measured_units + ["energy"]
     fig = Figure(figsize=(8, 2.6 * len(panels)), constrained_layout=True)
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
@@ -112,17 +108,18 @@ def _figure_png(res) -> bytes:
         if panel == "states":
             for st in s.states:
                 ax.plot(res.t, res[st.name] / st.typical, label=f"{st.name} / {st.typical:g} {st.unit}")
-            ax.set_ylabel("state / scale")
-        elif panel == "measured":
+            ax.set_ylabel("state / scale [1]")
+        elif panel != "energy":
             for mo in s.measured:
-                ax.plot(res.t, res[mo.name], label=f"{mo.name} [{mo.unit}]")
-            ax.set_ylabel("measured")
+                if mo.unit == panel:
+                    ax.plot(res.t, res[mo.name], label=mo.name)
+            ax.set_ylabel(f"measured [{panel}]")
         else:
-            supplied, dissipated = _energy_accounts(res)
+            E_supplied, E_dissipated = res.energy_accounts()
             ax.plot(res.t, res.H - res.H[0], label="H - H(0)")
-            ax.plot(res.t, supplied, label="supplied")
-            ax.plot(res.t, dissipated, label="dissipated")
-            ax.plot(res.t, res.H - res.H[0] - supplied + dissipated, "k:", label="balance residual")
+            ax.plot(res.t, E_supplied, label="E_supplied (∫ supplied power dt)")
+            ax.plot(res.t, E_dissipated, label="E_dissipated (∫ dissipated power dt)")
+            ax.plot(res.t, res.H - res.H[0] - E_supplied + E_dissipated, "k:", label="balance residual")
             ax.set_ylabel("energy [J]")
         ax.legend(loc="best", fontsize="small")
         ax.grid(True, alpha=0.3)

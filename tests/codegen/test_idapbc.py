@@ -266,7 +266,7 @@ def test_invalid_design_inputs_name_the_culprit(kwargs, error, match):
 
 def test_hasel_input_errors(hasel):
     with pytest.raises(InputDataError, match="outside the validity domain"):
-        design(hasel, {"tip": TIP}, neglect=["seg*.Q1"])  # default x0: l_p at its lower range, below the chord
+        design(hasel, {"tip": TIP}, x0={k: 0.0145 for k in REST}, neglect=["seg*.Q1"])  # l_p below the chord
     with pytest.raises(InputDataError, match="not matched"):
         design(hasel, {"tip": TIP}, x0=REST, neglect=["seg*.Q1"], stiffness={"seg1.Q2": 1e9})
     with pytest.raises(InputDataError, match="no state matches 'seg\\*.Q3'"):

@@ -17,13 +17,19 @@ from phs.workflows.loader import load_model
 from systems.examples import mass_spring_damper
 
 RC = "systems.examples:rc_circuit"
-RC_COLUMNS = ["t", "C.Q", "U", "U.i", "v_C", "H", "dissipated", "supplied"]
+RC_COLUMNS = ["t [s]", "C.Q [C]", "U [V]", "U.i [A]", "v_C [V]", "H [J]", "dissipated [W]", "supplied [W]"]
+
+
+def csv_header(path) -> list[str]:
+    with open(path, newline="") as fh:
+        return next(csv.reader(fh))
 
 
 def read_csv(path) -> tuple[list[str], np.ndarray]:
+    """Column names (without their `` [unit]``) and the data."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
-    return rows[0], np.array(rows[1:], dtype=float)
+    return [c.split(" [")[0] for c in rows[0]], np.array(rows[1:], dtype=float)
 
 
 def simulate(tmp_path, *extra, model=RC, t_end="5e-3", dt="1e-4"):
@@ -42,7 +48,7 @@ def test_version(capsys):
 def test_step_response_matches_analytic_rc(tmp_path):
     assert simulate(tmp_path, "--input", "step(1.0)", "--rtol", "1e-10", "--atol", "1e-10") == 0
     header, data = read_csv(tmp_path / "res.csv")
-    assert header == RC_COLUMNS
+    assert csv_header(tmp_path / "res.csv") == RC_COLUMNS
     t, q = data[:, 0], data[:, header.index("C.Q")]
     np.testing.assert_allclose(t, np.arange(0, 5e-3 + 0.5e-4, 1e-4), rtol=0, atol=1e-15)
     assert len(t) == 51
@@ -58,7 +64,7 @@ def test_square_input_with_plot_and_json(tmp_path):
                   "--json", str(tmp_path / "summary.json"), t_end="0.04", dt="1e-3")
     assert rc == 0
     header, data = read_csv(tmp_path / "res.csv")
-    assert header == RC_COLUMNS
+    assert csv_header(tmp_path / "res.csv") == RC_COLUMNS
     u = data[:, header.index("U")]
     assert set(np.round(u, 12)) == {1.0, -1.0}
     assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -175,6 +181,34 @@ def test_invalid_input_is_reported_and_nothing_written(tmp_path, capsys, model, 
     for culprit in culprits:
         assert culprit in err, (culprit, err)
     assert set(os.listdir(tmp_path)) == before
+
+
+def test_success_says_what_was_written(tmp_path, capsys):
+    assert simulate(tmp_path, "--input", "step(1.0)", "--json", str(tmp_path / "s.json")) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1, out
+    for part in ["'rc'", "51 samples", "t = 0.005 s", str(tmp_path / "res.csv"), str(tmp_path / "s.json")]:
+        assert part in out, (part, out)
+
+
+def test_plot_alone_needs_no_csv_and_one_of_them_is_required(tmp_path, capsys):
+    argv = ["simulate", RC, "--t-end", "1e-3", "--dt", "1e-4", "--input", "step(1.0)"]
+    assert main([*argv, "--plot", str(tmp_path / "fig.png")]) == 0
+    assert os.listdir(tmp_path) == ["fig.png"]
+    assert "fig.png" in capsys.readouterr().out
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "--plot" in err and err.startswith("phs: error: ")
+
+
+def test_result_csv_reads_back_as_a_recording(tmp_path):
+    from phs.workflows.recording import Recording
+
+    assert simulate(tmp_path, "--input", "step(1.0)") == 0
+    rec = Recording.from_csv(tmp_path / "res.csv")
+    _, data = read_csv(tmp_path / "res.csv")
+    np.testing.assert_array_equal(rec["C.Q"], data[:, 1])
+    assert rec.units["C.Q"] == "C" and rec.units["dissipated"] == "W"
 
 
 @pytest.mark.parametrize("args", [["--dt", "-1"], ["--t-end", "nan"], ["--rtol", "0"]], ids=str)

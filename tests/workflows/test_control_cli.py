@@ -52,6 +52,16 @@ def test_failed_certificate_exits_1(capsys):
     assert "NOT positive definite" in out and "NOT ALL PASSED" in out
 
 
+def test_target_not_reached_in_the_simulated_time_is_said_and_exits_1(tmp_path, capsys):
+    rc = main(["control", MSD, "--target", "k.l=0.05", "--t-end", "2", "--rays", "4", "--simulations", "1",
+               "--json", str(tmp_path / "c.json")])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "all passed" in out and "inf s" not in out
+    assert "k.l: final" in out and "NOT REACHED" in out and "2 s" in out
+    assert json.loads((tmp_path / "c.json").read_text())["closed_loop"]["reached"] == {"k.l": False}
+
+
 @pytest.mark.parametrize(("argv", "match"), [
     (["control", "systems.electrostatic_actuator:electrostatic_actuator", "--target", "position=2e-4"],
      "not reachable"),
