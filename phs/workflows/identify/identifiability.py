@@ -101,6 +101,13 @@ def analyse(J: np.ndarray, D: np.ndarray, tol: float):
     Returns ``(Hp, P, rank)``: the rank-truncated inverse of ``JᵀJ`` back in fit coordinates
     (``D Vr Sr⁻² Vrᵀ D``), the projector on the unidentifiable directions in relative coordinates,
     and the numerical rank (singular values above ``tol`` times the largest).
+
+    Examples
+    --------
+    >>> J = np.array([[1.0, 1.0], [2.0, 2.0], [0.5, 0.5]])  # both columns alike: one free direction
+    >>> Hp, P, rank = analyse(J, np.ones(2), 1e-5)
+    >>> rank, np.round(P, 3).tolist()
+    (1, [[0.5, -0.5], [-0.5, 0.5]])
     """
     Jr = J * D
     n = Jr.shape[1]
@@ -116,7 +123,13 @@ def analyse(J: np.ndarray, D: np.ndarray, tol: float):
 
 def unidentified(P: np.ndarray, n_par: int) -> np.ndarray:
     """Whether each of the first ``n_par`` coordinates has a component along an unidentifiable
-    direction (``P``: the projector on those directions)."""
+    direction (``P``: the projector on those directions).
+
+    Examples
+    --------
+    >>> unidentified(np.array([[0.5, -0.5, 0.0], [-0.5, 0.5, 0.0], [0.0, 0.0, 0.0]]), 3).tolist()
+    [True, True, False]
+    """
     return np.diag(P)[:n_par] > _MEMBER**2
 
 
@@ -186,6 +199,13 @@ def combinations(P, cov_rel, free, values, units) -> tuple[list, list]:
     ``P``: projector on the unidentifiable directions (relative coordinates); ``cov_rel``: covariance
     of ``log |p|`` on the identifiable part.  Returns ``(identifiable, unidentifiable)``, lists of
     :class:`Combination`.
+
+    Examples
+    --------
+    >>> P = np.array([[0.5, -0.5], [-0.5, 0.5]])  # log R - log C is free
+    >>> ident, free = combinations(P, np.diag([1e-6, 1e-6]), ["R", "C"], {"R": 1e3, "C": 1e-6}, {"R": "Ohm", "C": "F"})
+    >>> ident[0].name, round(ident[0].value, 6), ident[0].unit, free[0].name
+    ('R·C', 0.001, 's', 'R/C')
     """
     ident, unident = [], []
     for g in _groups(P, len(free)):
