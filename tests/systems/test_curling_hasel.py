@@ -47,20 +47,38 @@ def test_any_number_of_segments_assembles(n):
     assert len(s.states) == 5 * n and s.input_names == ["U"]
 
 
-def test_law_of_cosines_shell_area_equals_the_printed_arcsin_form():
-    # with eps_geo = 0 the implemented shell area must equal eq. 1-2 wherever the arcsin is defined
-    rng = np.random.default_rng(1)
-    Lv = 0.015
-    th = rng.uniform(-0.3, 0.5, 200)
-    lp = rng.uniform(0.015, 0.018, 200)
-    arg = Lv / lp * np.sin((np.pi - th) / 2)
-    ok = arg <= 1
-    delta1 = (np.pi + th) / 2 - np.arcsin(arg[ok] * 1.0)
-    printed = lp[ok] * Lv * np.sin(delta1) / 4
-    alpha = (np.pi - th[ok]) / 2
-    c = Lv * np.cos(alpha) + np.sqrt(lp[ok] ** 2 - Lv**2 * np.sin(alpha) ** 2)
-    implemented = Lv * c * np.sin(alpha) / 4
-    np.testing.assert_allclose(implemented, printed, rtol=1e-10, atol=1e-16)
+def _paper_C2(theta, lp):
+    """Electrode capacitance from the paper's printed eqs. 1-4 and 14 (arcsin form of delta1, A_T from
+    the unzipped rest state, A_T = X_h L_e) with Table 3's values, independent of the library."""
+    Lv = Le = 0.015
+    Xh, eps0, eps_r, w, t = 0.002, 8.854e-12, 2.2, 0.05, 18e-6
+    delta1 = (np.pi + theta) / 2 - np.arcsin(Lv / lp * np.sin((np.pi - theta) / 2))
+    l_e = Le - (Xh * Le - Lv * lp / 4 * np.sin(delta1)) / Xh
+    return eps0 * eps_r * w * (l_e / (2 * t) + (Le - l_e) / (2 * t + Xh))
+
+
+def test_model_electrode_capacitance_equals_the_printed_arcsin_form():
+    """C2(theta, l_p) of the library's Hamiltonian (1 / dH/dQ2 at Q2 = 1: H holds Q2^2 / (2 C2)),
+    built with the law-of-cosines shell area and the volume constraint, against eqs. 1-4 and 14."""
+    s = curling_hasel(1).with_params({"eps_geo": 1e-7})  # the smallest regularisation allowed
+    grad = s.lambdify(s.grad_H)
+    iq2 = s.state_names.index("seg1.Q2")
+
+    def model_C2(theta, lp):
+        x = np.zeros(len(s.state_names))
+        x[s.state_names.index("seg1.theta")], x[s.state_names.index("seg1.l_p")], x[iq2] = theta, lp, 1.0
+        return 1.0 / float(np.asarray(grad(x, [0.0], s.param_vector()), dtype=float).reshape(-1)[iq2])
+
+    # at rest (theta = 0, l_p = L_v) nothing is zipped: C2 = eps0 eps_r w L_e / (2 t + X_h), by hand
+    # 8.854e-12 * 2.2 * 0.05 * 0.015 / 0.002036 = 7.1755e-12 F
+    assert model_C2(0.0, 0.015) == pytest.approx(7.1755e-12, rel=1e-4)
+    # tabulated points inside the domain (l_p >= L_v cos(theta/2), 0 <= l_e <= L_e); eps_geo = 1e-7 m
+    # shifts the shell's third side by eps^2 / (2 sqrt(X)) <= 1e-11 m: relative 1e-8
+    for theta, lp in [(0.05, 0.0150), (0.1, 0.0151), (0.1, 0.0155), (0.2, 0.0152), (0.3, 0.0158), (0.35, 0.0160)]:
+        assert lp >= 0.015 * np.cos(theta / 2)
+        assert model_C2(theta, lp) == pytest.approx(_paper_C2(theta, lp), rel=1e-7), (theta, lp)
+    # and the zipped part really grows with the bending: C2 at 0.3 rad is several times the rest value
+    assert _paper_C2(0.3, 0.0158) > 3 * 7.1755e-12
 
 
 def test_power_balance_along_a_10s_trajectory(hasel):

@@ -65,12 +65,35 @@ def test_validation_fit_and_training_fit(recovery):
     assert fit.log_scaled == ["C1", "R2"]  # parameters whose ranges span decades
 
 
-def test_standard_errors_match_the_scatter_of_the_residual(recovery):
+def test_standard_errors_match_an_independent_sandwich_from_finite_differences(recovery):
+    """The reported standard errors against the covariance of the weighted least-squares estimate
+    computed independently: output derivatives by central differences of ``simulate`` (not the CVODES
+    sensitivities), the injected noise levels (not the residual's), ``H⁻¹ (Σ w⁴ σ² JᵀJ) H⁻¹``."""
     fit, _ = recovery
-    # residual RMS on tip ~ the injected noise (1 % of range): the fit leaves white noise
-    r = fit.residuals["tip"]
-    y = fit._recording["tip"]
-    assert 0.5 < np.std(r) / (0.01 * (y.max() - y.min())) < 1.5
+    s = curling_hasel(4)
+    t = fit._recording.t
+    U = fit._recording["U"]
+    clean = simulate(s, t, u={"U": U}, x0=X0)
+    sigma = {ch: 0.01 * (clean[ch].max() - clean[ch].min()) for ch in ("tip", "current")}  # as injected
+    h = 1e-4  # relative step: truncation ~h^2, integration error (rtol 1e-11) / h ~ 1e-7
+    cols = {ch: [] for ch in sigma}
+    for k in FREE:
+        v = fit.values[k]
+        up, down = (simulate(s.with_params({**fit.values, k: v * (1 + e)}), t, u={"U": U}, x0=X0, rtol=1e-11)
+                    for e in (h, -h))
+        for ch in sigma:
+            cols[ch].append((up[ch] - down[ch]) / (2 * h * v))
+    Jc = {ch: np.column_stack(c) for ch, c in cols.items()}
+    H = sum(fit.weights[ch] ** 2 * Jc[ch].T @ Jc[ch] for ch in sigma)
+    B = sum(fit.weights[ch] ** 4 * sigma[ch] ** 2 * Jc[ch].T @ Jc[ch] for ch in sigma)
+    Hi = np.linalg.inv(H)
+    se = np.sqrt(np.diag(Hi @ B @ Hi))
+    # the weighted noise levels differ 16-fold between the channels (tip 0.033, current 0.54), so
+    # one pooled residual variance would misstate them (by up to 10 times for gamma2); the reported
+    # errors use each channel's own residual variance (4001 samples: ~1 % sampling spread) at the
+    # fitted values: they agree with the independent value to a few percent (measured: 1.1-1.7 %)
+    ratio = np.array([fit.std_errors[k] for k in FREE]) / se
+    assert np.all(np.abs(ratio - 1) < 0.06), dict(zip(FREE, ratio))
 
 
 def test_nrmse_fit_definition():

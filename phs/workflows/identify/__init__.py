@@ -13,7 +13,8 @@ scale.  Large fits run the dynamics, their derivatives and the output functions
 as compiled C, cached on disk by a hash of the model.
 
 Reported: fitted values, standard errors and 95 % intervals from the
-Jacobian, the correlation matrix with non-identifiable pairs flagged, NRMSE
+Jacobian (infinite for parameters along a direction the data do not determine, with the products
+of powers of them that the data do determine), the correlation matrix with strongly correlated pairs flagged, NRMSE
 fit % per output channel (``100 (1 - ||y - yhat|| / ||y - mean y||)``) on the
 training and validation recordings, residuals, iterations, time, and the
 sensitivity table of the curling HASEL paper (fit % at -10, -5, 0, +5, +10 %
@@ -23,7 +24,8 @@ Modules: :mod:`~phs.workflows.identify.solve` (the driver, :func:`identify`),
 :mod:`~phs.workflows.identify.sensitivities` (the residual and its Jacobian, segment by segment),
 :mod:`~phs.workflows.identify.c_library` (their compiled C), :mod:`~phs.workflows.identify.coordinates`
 (log scaling, bounds, channel weights), :mod:`~phs.workflows.identify.result`
-(:class:`IdentificationResult`, uncertainty), :mod:`~phs.workflows.identify.scoring` (NRMSE fit %) and
+(:class:`IdentificationResult`, uncertainty), :mod:`~phs.workflows.identify.identifiability` (the
+Jacobian's numerical rank, the identified and free combinations), :mod:`~phs.workflows.identify.scoring` (NRMSE fit %) and
 :mod:`~phs.workflows.identify.sensitivity_table` (the ±5/±10 % table).
 """
 

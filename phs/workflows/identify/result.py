@@ -8,6 +8,7 @@ import numpy as np
 
 from codegen.simulator import simulate
 from phs.signals import Sampled
+from phs.workflows.identify.identifiability import analyse, combinations, rank_tolerance, unidentified
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
 from phs.workflows.identify.sensitivity_table import _sensitivity_table
 
@@ -38,6 +39,10 @@ class IdentificationResult:
     sensitivity: dict = field(default_factory=dict)
     _recording: object = None
     compiled: bool = False  # whether the fit ran compiled C (see ``identify(compile=...)``)
+    # products of powers of the parameters that the data determine / leave free, among parameters
+    # that are not identifiable separately (see :mod:`phs.workflows.identify.identifiability`)
+    identifiable: list = field(default_factory=list)
+    unidentifiable: list = field(default_factory=list)
 
     @property
     def fitted_system(self):
@@ -56,11 +61,30 @@ class IdentificationResult:
         for ch, v in self.fit_percent.items():
             val = self.validation_fit_percent.get(ch)
             lines.append(f"  fit {ch}: {v:.2f} % (training)" + (f", {val:.2f} % (validation)" if val is not None else ""))
+        lines += [f"  {line}" for line in self.identifiability_sentences()]
+        grouped = {k for c in self.unidentifiable for k in c.group}
         for a, b, c in self.flagged_pairs:
+            if a in grouped and b in grouped:
+                continue  # said above
             lines.append(f"  warning: {a} and {b} are strongly correlated ({c:+.3f}): not separately identifiable")
         return "\n".join(lines)
 
     __str__ = summary
+
+    def identifiability_sentences(self) -> list[str]:
+        """One sentence per group of parameters that are not identifiable separately: which they are,
+        and the combinations of them that the data determine, with values and 95 % intervals."""
+        out = []
+        for group in dict.fromkeys(c.group for c in self.unidentifiable):
+            if len(group) == 1:
+                out.append(f"{group[0]} is not identifiable from these data (the fitted outputs do not depend on it).")
+                continue
+            known = [c for c in self.identifiable if c.group == group]
+            said = [f"their {'product' if all(e == 1 for e in c.exponents.values()) else 'combination'} {c.text()} is identified"
+                    for c in known]
+            out.append(f"{', '.join(group[:-1])} and {group[-1]} are not identifiable separately from these data"
+                       + ("; " + "; ".join(said) if said else " (no combination of them is determined)") + ".")
+        return out
 
     def to_dict(self) -> dict:
         return {
@@ -71,6 +95,8 @@ class IdentificationResult:
             "fit_percent": self.fit_percent, "validation_fit_percent": self.validation_fit_percent,
             "cost": self.cost, "iterations": self.iterations, "seconds": self.seconds, "outputs": self.outputs,
             "log_scaled": self.log_scaled, "message": self.message,
+            "identifiable": [c.to_dict() for c in self.identifiable],
+            "unidentifiable": [c.to_dict() for c in self.unidentifiable],
             "sensitivity": {k: {str(s): f for s, f in v.items()} for k, v in self.sensitivity.items()},
         }
 
@@ -118,30 +144,63 @@ class IdentificationResult:
         return fig
 
 
-def _uncertainty(r, J, values: dict, nominal, free: list, log_scaled: list):
-    """Standard errors, 95 % intervals, correlation matrix and strongly correlated pairs of the fitted
-    parameters from the output residual ``r`` and its Jacobian ``J`` in fit coordinates at the optimum
-    (``nominal``: the parameters' starting values, the unit of their linear coordinates)."""
-    n_res, n_par = len(r), J.shape[1]
-    sigma2 = float(r @ r) / max(n_res - n_par, 1)
-    try:
-        cov = sigma2 * np.linalg.pinv(J.T @ J)
-    except np.linalg.LinAlgError:
-        cov = np.full((n_par, n_par), np.nan)
+def _uncertainty(r, J, values: dict, nominal, free: list, log_scaled: list, n_channels: int = 1,
+                 rtol: float = 1e-8, units: dict | None = None):
+    """Standard errors, 95 % intervals, correlation matrix, strongly correlated pairs and the
+    identifiability analysis of the fitted parameters.
+
+    ``r`` is the weighted output residual at the optimum, channel by channel (``n_channels`` blocks
+    of equal length), ``J`` its Jacobian in fit coordinates (``nominal``: the parameters' starting
+    values, the unit of their linear coordinates; columns after ``len(free)`` are estimated states).
+    The rank of ``J`` is decided in relative coordinates with the threshold
+    :func:`~phs.workflows.identify.identifiability.rank_tolerance` of the integration tolerance
+    ``rtol``; a parameter with a component along an unidentifiable direction gets an infinite standard
+    error and interval.  The covariance of the rest is the rank-truncated sandwich
+    ``H⁺ (Σ_c s_c² J_cᵀ J_c) H⁺`` (``H = JᵀJ``, ``s_c²`` the residual variance of channel ``c``):
+    with one channel it is ``s² H⁺``; with several it stays right when their weighted noise levels
+    differ.  Returns ``(std, ci, corr, flagged, identifiable, unidentifiable)``.
+    """
+    n_res, n_col = len(r), J.shape[1]
+    n_par = len(free)
+    pv = np.array([values[k] for k in free], dtype=float)
+    nom = np.asarray(nominal, dtype=float)
+    D = np.ones(n_col)
+    lin = np.array([k not in log_scaled for k in free], dtype=bool)
+    ok = lin & (pv != 0) & (nom != 0)
+    D[:n_par][ok] = pv[ok] / nom[ok]  # linear coordinate p / nominal -> log |p|
+    Hp, P, rank = analyse(J, D, rank_tolerance(rtol))
+    dof = n_res / max(n_res - rank, 1)
+    B = np.zeros((n_col, n_col))
+    for rc, Jc in zip(np.array_split(r, n_channels), np.array_split(J, n_channels), strict=True):
+        B += float(rc @ rc) / max(len(rc), 1) * dof * (Jc.T @ Jc)
+    cov = Hp @ B @ Hp
+    free_dir = unidentified(P, n_par)  # parameters along an unidentifiable direction
     se_z = np.sqrt(np.maximum(np.diag(cov), 0))
     std, ci = {}, {}
     for i, k in enumerate(free):
         v = values[k]
-        if k in log_scaled:
+        if free_dir[i]:
+            std[k] = float("inf")
+            ci[k] = (0.0, float("inf")) if k in log_scaled else (float("-inf"), float("inf"))
+        elif k in log_scaled:
             std[k] = abs(v) * se_z[i]
-            # an unidentifiable parameter has a huge log-scale error: its interval is (0, inf)
             spread = float(np.exp(min(1.96 * se_z[i], 700.0)))
             ci[k] = (v / spread, v * spread if spread < 1e300 else float("inf"))
         else:
             std[k] = abs(nominal[i]) * se_z[i]
             ci[k] = (v - 1.96 * std[k], v + 1.96 * std[k])
-    dd = np.sqrt(np.maximum(np.diag(cov)[:len(free)], 1e-300))
-    corr = cov[: len(free), : len(free)] / np.outer(dd, dd)
-    flagged = [(free[a], free[b], float(corr[a, b])) for a in range(len(free)) for b in range(a + 1, len(free))
+    # correlation: of the estimates on the identifiable part; between two parameters along an
+    # unidentifiable direction, the limit as its variance grows without bound (the null directions'
+    # projector); between one such and a determined parameter, 0
+    dd = np.sqrt(np.maximum(np.diag(cov)[:n_par], 1e-300))
+    corr = cov[:n_par, :n_par] / np.outer(dd, dd)
+    pn = np.sqrt(np.maximum(np.diag(P)[:n_par], 1e-300))
+    sgn = np.sign(D[:n_par])
+    corr_free = P[:n_par, :n_par] / np.outer(pn, pn) * np.outer(sgn, sgn)
+    corr = np.where(np.outer(free_dir, free_dir), corr_free, np.where(np.add.outer(free_dir, free_dir), 0.0, corr))
+    np.fill_diagonal(corr, 1.0)
+    flagged = [(free[a], free[b], float(corr[a, b])) for a in range(n_par) for b in range(a + 1, n_par)
                if abs(corr[a, b]) > 0.95]
-    return std, ci, corr, flagged
+    cov_rel = cov[:n_par, :n_par] / np.outer(D[:n_par], D[:n_par])
+    ident, unident = combinations(P, cov_rel, free, values, dict(units or {}))
+    return std, ci, corr, flagged, ident, unident

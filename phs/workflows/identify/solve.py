@@ -171,7 +171,9 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     r = np.asarray(r).reshape(-1)[: prob.n_outputs_residual]
     J = np.asarray(J)[: prob.n_outputs_residual]
     values = prob.values(z, log_scaled, free)
-    std, ci, corr, flagged = _uncertainty(r, J, values, prob.nominal, free, log_scaled)
+    std, ci, corr, flagged, ident, unident = _uncertainty(
+        r, J, values, prob.nominal, free, log_scaled, n_channels=len(outs), rtol=rtol,
+        units={k: system.param(k).unit for k in free})
     x0_fit = x0v.copy()
     for j, name in enumerate(estimate_x0):
         i = system.state_names.index(name)
@@ -187,6 +189,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         validation_fit_percent={}, residuals={ch: recording[ch] - sims[ch] for ch in outs}, cost=float(sol.cost),
         iterations=int(nfev), seconds=_time.perf_counter() - wall, x0=x0_fit, outputs=outs, weights=w,
         log_scaled=log_scaled, message=str(sol.message), _recording=recording, compiled=prob.compiled,
+        identifiable=ident, unidentifiable=unident,
     )
     if validation is not None:
         result.validate(validation)
