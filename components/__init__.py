@@ -6,6 +6,7 @@ parameters ``{component}.{name}``; give a :class:`phs.Param` to share one.
 """
 
 from components.constraints import GeometricConstraint, Geometry, geometric_symbol
+from components.control import PositionLoop, VelocityLoop
 from components.coupling import Gyrator, Transformer
 from components.electrical import (
     Capacitor,
@@ -36,5 +37,5 @@ __all__ = [
     "Damper", "ForceSource", "Gravity", "LinearSpring", "Mass", "NonlinearSpring", "RotationalDamper",
     "Potential", "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
     "GeometricConstraint", "Geometry", "geometric_symbol",
-    "ConfigurationInertia", "KinematicChain",
+    "ConfigurationInertia", "KinematicChain", "PositionLoop", "VelocityLoop",
 ]

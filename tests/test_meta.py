@@ -105,6 +105,8 @@ CONSTRUCTORS = {
                                                                        - th, **kw),
     "KinematicChain": lambda **kw: components.KinematicChain("arm", ["j.theta"], lengths=[0.1], masses=[0.1], **kw),
     "ConfigurationInertia": lambda **kw: components.ConfigurationInertia("rod", ["j.theta"], sp.Matrix([[1]]), **kw),
+    "PositionLoop": lambda **kw: components.PositionLoop("pd", K_p=10.0, K_d=1.0, **kw),
+    "VelocityLoop": lambda **kw: components.VelocityLoop("vc", K_v=1.0, **kw),
 }
 
 

@@ -43,6 +43,7 @@ from components import (
     LinearSpring,
     Mass,
     NonlinearSpring,
+    PositionLoop,
     Potential,
     Resistor,
     RotationalDamper,
@@ -51,6 +52,7 @@ from components import (
     TorsionalSpring,
     Transformer,
     VariableCapacitor,
+    VelocityLoop,
     VoltageSource,
     geometric_symbol,
 )
@@ -232,6 +234,25 @@ def _bonded_transformer_chain():
                                    LinearSpring("k", K=2.0)], [series("F", "m", "b", "tf.a"), bond("tf.b", "k")])
 
 
+def _position_loop():
+    """A mass-spring-damper under PD position control (unfiltered reference)."""
+    return _spec("servo", [Mass("m", m=0.5), LinearSpring("k", K=4.0), Damper("b", b=0.2),
+                           PositionLoop("pd", K_p=20.0, K_d=2.0)], [series("m", "k", "b", "pd")])
+
+
+def _position_loop_filtered():
+    """PD position control on a first-order filtered reference, acting on the plant's own position state."""
+    return _spec("servo_f", [Mass("m", m=0.5), LinearSpring("k", K=4.0), Damper("b", b=0.2),
+                             PositionLoop("pd", K_p=20.0, K_d=0.5, tau=0.05, position="k.l")],
+                 [series("m", "k", "b", "pd")])
+
+
+def _velocity_loop():
+    """A mass with viscous friction under velocity control (a virtual damper to a reference velocity)."""
+    return _spec("cruise", [Mass("m", m=0.5), Damper("b", b=0.2), VelocityLoop("vc", K_v=3.0)],
+                 [series("m", "b", "vc")])
+
+
 CASES = {
     "Capacitor": _capacitor,
     "VariableCapacitor": _variable_capacitor,
@@ -260,6 +281,9 @@ CASES = {
     "Geometry": _geometry,
     "KinematicChain": _kinematic_chain,
     "ConfigurationInertia": _configuration_inertia,
+    "PositionLoop": _position_loop,
+    "PositionLoop(filtered)": _position_loop_filtered,
+    "VelocityLoop": _velocity_loop,
 }
 MODELS = sorted(set(CASES.values()), key=lambda f: f.__name__)
 
