@@ -48,7 +48,7 @@ from collections.abc import Sequence
 import sympy as sp
 
 from components._base import require_positive
-from phs.component import Component, Dissipator, Piece, Port, Relation, Storage
+from phs.component import Component, Dissipator, Piece, Port, Relation
 from phs.errors import ModelError
 from phs.params import EnergyTerm, Measured
 
