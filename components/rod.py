@@ -38,7 +38,7 @@ is the velocity it acts on): ``tip_x``, ``tip_y``, ``tip_m`` (force/torque at th
 frame), ``tip_t``, ``tip_n`` (follower force along/normal to the tip cross-section), ``qx``, ``qy``
 (uniform load per unit length, conjugate flow ``sum_k h_k v_k``), ``fx{k}``, ``fy{k}`` (node forces)
 and ``c{e}`` (a couple bending element ``e``: ``+M`` on node ``e``, ``-M`` on node ``e-1``,
-conjugate flow ``omega_e - omega_{e-1}``).
+conjugate flow ``omega_e - omega_{e-1}``; ``c{a}_{b}`` the same over the nodes ``a < b``).
 """
 
 from __future__ import annotations
@@ -113,8 +113,9 @@ class CosseratRod(Component):
         Uniform load ports ``qx``/``qy`` [N/m].
     node_forces : sequence of int
         Nodes ``k`` (1..n) with force ports ``fx{k}``, ``fy{k}``.
-    couples : sequence of int
-        Elements ``e`` (1..n) with bending couple ports ``c{e}``.
+    couples : sequence of int or (int, int)
+        Elements ``e`` (1..n) with bending couple ports ``c{e}`` (``+M`` on node ``e``, ``-M`` on node
+        ``e-1``), or node pairs ``(a, b)`` with a couple over the span between them (port ``c{a}_{b}``).
 
     Examples
     --------
@@ -147,10 +148,12 @@ class CosseratRod(Component):
         bad = [d for d in distributed if d not in ("x", "y")]
         if bad:
             raise ModelError(f"component {name!r}: distributed loads act along 'x' or 'y', not {bad}")
-        for what, idx in (("node_forces", node_forces), ("couples", couples)):
-            wrong = [k for k in idx if not (isinstance(k, int) and 1 <= k <= n)]
-            if wrong:
-                raise ModelError(f"component {name!r}: {what} must be indices in 1..{n}, got {wrong}")
+        wrong = [k for k in node_forces if not (isinstance(k, int) and 1 <= k <= n)]
+        wrong += [c for c in couples if not (isinstance(c, int) and 1 <= c <= n) and not (
+            isinstance(c, tuple) and len(c) == 2 and all(isinstance(k, int) for k in c) and 0 <= c[0] < c[1] <= n)]
+        if wrong:
+            raise ModelError(f"component {name!r}: node_forces must be nodes in 1..{n} and couples elements in 1..{n} "
+                             f"or node pairs (a, b) with 0 <= a < b <= {n}; got {wrong}")
         self.n = n
         self.values = dict(L=L, rho=rho, A=A, I=I, E=E, G=E / 3 if G is None else G, k_s=k_s, tau=tau, c_v=c_v, g=g,
                            rho_w=rho_w)
@@ -336,8 +339,9 @@ class CosseratRod(Component):
         for k in self.node_forces:
             add(f"fx{k}", "translational", (k, 0, 1))
             add(f"fy{k}", "translational", (k, 1, 1))
-        for e in self.couples:
-            add(f"c{e}", "rotational", *([(e, 2, 1)] + ([(e - 1, 2, -1)] if e > 1 else [])))
+        for c in self.couples:
+            a, b = (c - 1, c) if isinstance(c, int) else c
+            add(f"c{c}" if isinstance(c, int) else f"c{a}_{b}", "rotational", *([(b, 2, 1)] + ([(a, 2, -1)] if a > 0 else [])))
         return ports, loads
 
 
