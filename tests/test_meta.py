@@ -104,6 +104,8 @@ CONSTRUCTORS = {
                                                                        - th, **kw),
     "KinematicChain": lambda **kw: components.KinematicChain("arm", ["j.theta"], lengths=[0.1], masses=[0.1], **kw),
     "ConfigurationInertia": lambda **kw: components.ConfigurationInertia("rod", ["j.theta"], sp.Matrix([[1]]), **kw),
+    "CosseratRod": lambda **kw: components.CosseratRod("rod", n=2, **kw),
+    "HydrogelActuator": lambda **kw: components.HydrogelActuator("sva", **kw),
 }
 
 
