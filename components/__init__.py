@@ -17,6 +17,7 @@ from components.electrical import (
     VariableCapacitor,
     VoltageSource,
 )
+from components.hydrogel import HydrogelActuator
 from components.kinematics import ConfigurationInertia, KinematicChain
 from components.mechanical import (
     Damper,
@@ -31,11 +32,12 @@ from components.mechanical import (
     TorqueSource,
     TorsionalSpring,
 )
+from components.rod import CosseratRod
 
 __all__ = [
     "Capacitor", "CurrentSource", "DriftBranch", "Inductor", "Resistor", "VariableCapacitor", "VoltageSource",
     "Damper", "ForceSource", "Gravity", "LinearSpring", "Mass", "NonlinearSpring", "RotationalDamper",
     "Potential", "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
     "GeometricConstraint", "Geometry", "geometric_symbol",
-    "ConfigurationInertia", "KinematicChain", "PositionLoop", "VelocityLoop",
+    "ConfigurationInertia", "KinematicChain", "PositionLoop", "VelocityLoop", "CosseratRod", "HydrogelActuator",
 ]

@@ -107,6 +107,8 @@ CONSTRUCTORS = {
     "ConfigurationInertia": lambda **kw: components.ConfigurationInertia("rod", ["j.theta"], sp.Matrix([[1]]), **kw),
     "PositionLoop": lambda **kw: components.PositionLoop("pd", K_p=10.0, K_d=1.0, **kw),
     "VelocityLoop": lambda **kw: components.VelocityLoop("vc", K_v=1.0, **kw),
+    "CosseratRod": lambda **kw: components.CosseratRod("rod", n=2, **kw),
+    "HydrogelActuator": lambda **kw: components.HydrogelActuator("sva", **kw),
 }
 
 

@@ -253,7 +253,20 @@ def _velocity_loop():
                  [series("m", "b", "vc")])
 
 
+def _rod_and_hydrogel():
+    """A two-element Cosserat rod (exact Kelvin-Voigt damping, gravity, drag) under a follower tip force,
+    bent by a hydrogel actuator on its first element."""
+    from components import CosseratRod, HydrogelActuator
+
+    rod = CosseratRod("rod", n=2, L=0.1, E=1e5, I=1e-10, A=1e-5, tau=0.01, damping="kelvin_voigt", c_v=0.01,
+                      gravity=True, tip="follower", couples=[1])
+    return _spec("rodsva", [rod, ForceSource("Ft"), ForceSource("Fn"), TorqueSource("M"), HydrogelActuator("sva", input="V")],
+                 [series("Ft", "rod.tip_t"), series("Fn", "rod.tip_n"), series("M", "rod.tip_m"), series("rod.c1", "sva.c")])
+
+
 CASES = {
+    "CosseratRod": _rod_and_hydrogel,
+    "HydrogelActuator": _rod_and_hydrogel,
     "Capacitor": _capacitor,
     "VariableCapacitor": _variable_capacitor,
     "Inductor": _inductor,
