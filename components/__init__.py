@@ -16,6 +16,7 @@ from components.electrical import (
     VariableCapacitor,
     VoltageSource,
 )
+from components.hydraulic import Chamber, FlowSource, PressureTransducer
 from components.kinematics import ConfigurationInertia, KinematicChain
 from components.mechanical import (
     Damper,
@@ -30,6 +31,7 @@ from components.mechanical import (
     TorqueSource,
     TorsionalSpring,
 )
+from components.peano import PeanoHasel
 
 __all__ = [
     "Capacitor", "CurrentSource", "DriftBranch", "Inductor", "Resistor", "VariableCapacitor", "VoltageSource",
@@ -37,4 +39,5 @@ __all__ = [
     "Potential", "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
     "GeometricConstraint", "Geometry", "geometric_symbol",
     "ConfigurationInertia", "KinematicChain",
+    "Chamber", "FlowSource", "PressureTransducer", "PeanoHasel",
 ]

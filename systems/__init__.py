@@ -5,6 +5,7 @@ from systems.electrostatic_actuator import electrostatic_actuator
 from systems.examples import duffing_oscillator, mass_spring_damper, rc_circuit, rlc_circuit
 from systems.manta_ray_fin import manta_ray_fin
 from systems.msd_hasel import hasel_platform, msd_hasel
+from systems.peano_swimmer import peano_swimmer, swimmer_drive
 
 __all__ = ["rc_circuit", "rlc_circuit", "mass_spring_damper", "duffing_oscillator", "curling_hasel", "manta_ray_fin",
-           "electrostatic_actuator", "msd_hasel", "hasel_platform"]
+           "electrostatic_actuator", "msd_hasel", "hasel_platform", "peano_swimmer", "swimmer_drive"]
