@@ -1,5 +1,6 @@
 """Ready-made models built only from components and the public interconnection API."""
 
+from systems.catheter_bender import catheter_bender, volume_chirp
 from systems.curling_hasel import curling_hasel
 from systems.electrostatic_actuator import electrostatic_actuator
 from systems.examples import duffing_oscillator, mass_spring_damper, rc_circuit, rlc_circuit
@@ -8,4 +9,5 @@ from systems.msd_hasel import hasel_platform, msd_hasel
 from systems.peano_swimmer import peano_swimmer, swimmer_drive
 
 __all__ = ["rc_circuit", "rlc_circuit", "mass_spring_damper", "duffing_oscillator", "curling_hasel", "manta_ray_fin",
-           "electrostatic_actuator", "msd_hasel", "hasel_platform", "peano_swimmer", "swimmer_drive"]
+           "electrostatic_actuator", "msd_hasel", "hasel_platform", "peano_swimmer", "swimmer_drive",
+           "catheter_bender", "volume_chirp"]
