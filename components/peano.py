@@ -56,8 +56,8 @@ def peano_force(e, b1=EQ3["b1"], b2=EQ3["b2"], b3=EQ3["b3"], b4=EQ3["b4"]):
 
     Examples
     --------
-    >>> round(peano_force(2.0), 4)
-    2.6877
+    >>> round(peano_force(2.0), 4)   # 2 + 21.71 (1/2.22 - 0.39)
+    3.3124
     """
     return b1 * e + b2 * (1 / (e + b3) - b4)
 
