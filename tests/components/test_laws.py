@@ -29,12 +29,12 @@ import components
 from codegen import generate
 from components import (
     Capacitor,
-    ConfigurationInertia,
     Chamber,
+    ConfigurationInertia,
     CurrentSource,
-    FlowSource,
     Damper,
     DriftBranch,
+    FlowSource,
     ForceSource,
     GeometricConstraint,
     Geometry,
