@@ -98,6 +98,8 @@ class PeanoHasel(Component):
         Film stiffness [N/m] and smoothing length [m] of the one-sided stretch spring.
     b1, b2, b3, b4 : float or Param
         Coefficients of eq. 3 (``N``, ``N``, percent, 1/percent); printed values by default.
+    state, range, scale : optional
+        Name, physical range and scale of the charge state (as for :class:`components.Capacitor`).
 
     Raises
     ------
@@ -114,11 +116,11 @@ class PeanoHasel(Component):
     """
 
     def __init__(self, name: str, strain, L0=0.05, V_ref=6000.0, C0=1.5e-9, k_f=1e5, d0=2e-5,
-                 b1=EQ3["b1"], b2=EQ3["b2"], b3=EQ3["b3"], b4=EQ3["b4"], **kw):
+                 b1=EQ3["b1"], b2=EQ3["b2"], b3=EQ3["b3"], b4=EQ3["b4"], state: str | None = None, range=None, scale=None):
         super().__init__(name)
         if not isinstance(strain, sp.Expr):
             raise ModelError(f"component {name!r}: strain must be a sympy expression of states")
-        self.strain, self.kw = strain, kw
+        self.strain, self.kw = strain, {"state": state, "range": range, "scale": scale}
         self.values = {"L0": L0, "V_ref": V_ref, "C0": C0, "k_f": k_f, "d0": d0, "b1": b1, "b2": b2, "b3": b3, "b4": b4}
 
     _META = {"L0": ("m", "flat length of the actuator"),
@@ -158,8 +160,10 @@ class PeanoHasel(Component):
         --------
         >>> from phs.component import symbol_of_state
         >>> a = PeanoHasel("L", strain=symbol_of_state("s"))
-        >>> a.capacitance(a.symbols()[0]).subs(symbol_of_state("s"), 0)
-        L.C0
+        >>> S, decl = a.symbols()
+        >>> C = a.capacitance(S).subs({d.symbol: d.value for d in decl})
+        >>> float(C.subs(symbol_of_state("s"), 0))   # C0 at zero strain
+        1.5e-09
         """
         e = 100 * self.strain
         e_star = sp.sqrt(S["b2"] / S["b1"]) - S["b3"]

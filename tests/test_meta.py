@@ -105,6 +105,10 @@ CONSTRUCTORS = {
                                                                        - th, **kw),
     "KinematicChain": lambda **kw: components.KinematicChain("arm", ["j.theta"], lengths=[0.1], masses=[0.1], **kw),
     "ConfigurationInertia": lambda **kw: components.ConfigurationInertia("rod", ["j.theta"], sp.Matrix([[1]]), **kw),
+    "PeanoHasel": lambda **kw: components.PeanoHasel("act", strain=0.02 + 0.01 * th, **kw),
+    "Chamber": lambda **kw: components.Chamber("ch", k1=1e9, **kw),
+    "FlowSource": lambda **kw: components.FlowSource("q", **kw),
+    "PressureTransducer": lambda **kw: components.PressureTransducer("wall", A=1e-5, **kw),
 }
 
 

@@ -197,6 +197,7 @@ def regress(data, terms=BENDER_TERMS, *, target: str = "F", nonnegative: bool = 
     const = [i for i, term in enumerate(terms) if term.strip() == "1"]
     others = [i for i in range(len(terms)) if i not in const]
     steps, prev = [], None
+    floor = 1e-12 * float(np.sqrt(np.mean(y**2)))  # RMSE at rounding level: nothing left to explain
     for k in range(1, min(max_terms, len(others)) + 1):
         best = None
         for subset in itertools.combinations(others, k):
@@ -204,7 +205,7 @@ def regress(data, terms=BENDER_TERMS, *, target: str = "F", nonnegative: bool = 
             c, e = _solve(X[:, idx], y, nonnegative)
             if best is None or e < best[1]:
                 best = (idx, e, c)
-        decrease = math.nan if prev is None else (prev[1] - best[1]) / prev[1] if prev[1] > 0 else 0.0
+        decrease = math.nan if prev is None else (prev[1] - best[1]) / prev[1] if prev[1] > floor else 0.0
         steps.append({"k": k, "terms": tuple(terms[i] for i in best[0]), "rmse": best[1], "decrease": decrease,
                       "coefficients": best[2]})
         prev = best
