@@ -17,6 +17,7 @@ from components.electrical import (
     VariableCapacitor,
     VoltageSource,
 )
+from components.hydraulic import Chamber, FlowSource, PressureTransducer
 from components.hydrogel import HydrogelActuator
 from components.kinematics import ConfigurationInertia, KinematicChain
 from components.mechanical import (
@@ -32,6 +33,7 @@ from components.mechanical import (
     TorqueSource,
     TorsionalSpring,
 )
+from components.peano import PeanoHasel
 from components.rod import CosseratRod
 
 __all__ = [
@@ -40,4 +42,5 @@ __all__ = [
     "Potential", "RotationalInertia", "TorqueSource", "TorsionalSpring", "Gyrator", "Transformer",
     "GeometricConstraint", "Geometry", "geometric_symbol",
     "ConfigurationInertia", "KinematicChain", "PositionLoop", "VelocityLoop", "CosseratRod", "HydrogelActuator",
+    "Chamber", "FlowSource", "PressureTransducer", "PeanoHasel",
 ]

@@ -333,6 +333,33 @@ def chirp(amplitude: float, f0: float, f1: float, duration: float, offset: float
     return Expression(sp.Float(offset) + sp.Float(amplitude) * sp.sin(2 * sp.pi * (sp.Float(f0) * TIME + sp.Float(k / 2) * TIME**2)))
 
 
+def exponential_chirp(amplitude: float, f0: float, f1: float, duration: float, offset: float = 0.0) -> Signal:
+    """Exponential (logarithmic) chirp from ``f0`` to ``f1`` Hz over ``duration`` seconds (Novak et al.).
+
+    ``s(t) = offset + amplitude sin(2 pi f0 L (exp(t / L) - 1))`` with ``L = duration / ln(f1 / f0)``:
+    the instantaneous frequency ``f0 exp(t / L)`` grows by the same factor in equal times and
+    reaches ``f1`` at ``t = duration``; each octave gets the same time.
+
+    Raises
+    ------
+    InputDataError
+        Unless ``0 < f0``, ``0 < f1``, ``f0 != f1`` and ``duration > 0``.
+
+    Examples
+    --------
+    >>> s = exponential_chirp(1.0, 0.01, 5.0, 1800.0)
+    >>> L = 1800.0 / math.log(5.0 / 0.01)
+    >>> float(s(0.0)) == 0.0, round(float(s(100.0)) - math.sin(2 * math.pi * 0.01 * L * math.expm1(100.0 / L)), 12)
+    (True, 0.0)
+    """
+    if not (f0 > 0 and f1 > 0 and f0 != f1 and duration > 0):
+        raise InputDataError(f"exponential chirp: need 0 < f0 != f1 and duration > 0, got f0={f0}, f1={f1}, "
+                             f"duration={duration}")
+    L = duration / math.log(f1 / f0)
+    phase = 2 * sp.pi * sp.Float(f0 * L) * (sp.exp(TIME / sp.Float(L)) - 1)
+    return Expression(sp.Float(offset) + sp.Float(amplitude) * sp.sin(phase))
+
+
 @dataclass(frozen=True)
 class Sampled(Signal):
     """Samples on a time grid, linearly interpolated (``hold="linear"``) or held (``"zoh"``).
@@ -392,7 +419,8 @@ def as_signal(spec) -> Signal:
     raise InputDataError(f"cannot use {type(spec).__name__} as an input signal")
 
 
-_FUNCS = {"square": square, "step": step, "staircase": staircase, "sine": sine, "chirp": chirp}
+_FUNCS = {"square": square, "step": step, "staircase": staircase, "sine": sine, "chirp": chirp,
+          "exponential_chirp": exponential_chirp}
 _MATH = {"sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "exp": sp.exp, "log": sp.log, "sqrt": sp.sqrt, "tanh": sp.tanh,
          "sinh": sp.sinh, "cosh": sp.cosh, "abs": sp.Abs, "Abs": sp.Abs, "sign": sp.sign, "Heaviside": sp.Heaviside,
          "atan": sp.atan, "asin": sp.asin, "acos": sp.acos}

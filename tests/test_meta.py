@@ -109,6 +109,10 @@ CONSTRUCTORS = {
     "VelocityLoop": lambda **kw: components.VelocityLoop("vc", K_v=1.0, **kw),
     "CosseratRod": lambda **kw: components.CosseratRod("rod", n=2, **kw),
     "HydrogelActuator": lambda **kw: components.HydrogelActuator("sva", **kw),
+    "PeanoHasel": lambda **kw: components.PeanoHasel("act", strain=0.02 + 0.01 * th, **kw),
+    "Chamber": lambda **kw: components.Chamber("ch", k1=1e9, **kw),
+    "FlowSource": lambda **kw: components.FlowSource("q", **kw),
+    "PressureTransducer": lambda **kw: components.PressureTransducer("wall", A=1e-5, **kw),
 }
 
 

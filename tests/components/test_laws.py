@@ -29,10 +29,12 @@ import components
 from codegen import generate
 from components import (
     Capacitor,
+    Chamber,
     ConfigurationInertia,
     CurrentSource,
     Damper,
     DriftBranch,
+    FlowSource,
     ForceSource,
     GeometricConstraint,
     Geometry,
@@ -43,8 +45,10 @@ from components import (
     LinearSpring,
     Mass,
     NonlinearSpring,
+    PeanoHasel,
     PositionLoop,
     Potential,
+    PressureTransducer,
     Resistor,
     RotationalDamper,
     RotationalInertia,
@@ -264,6 +268,24 @@ def _rod_and_hydrogel():
                  [series("Ft", "rod.tip_t"), series("Fn", "rod.tip_n"), series("M", "rod.tip_m"), series("rod.c1", "sva.c")])
 
 
+def _peano_hasel():
+    """A Peano-HASEL (eq. 3 of the swimmer paper) pulling a mass against a spring; strain from the spring's length."""
+    l = symbol_of_state("k.l")  # noqa: E741
+    L0 = Param("L0", 0.05, "m", "flat length")
+    act = PeanoHasel("act", strain=(L0.symbol - l) / L0.symbol, L0=L0)
+    # lengths from 0.05 % longer than flat (film taut) to 6 % shorter (beyond the fit's minimum)
+    return _spec("peano", [VoltageSource("U"), Resistor("R", R=1e6), act, Mass("m", m=0.01),
+                           LinearSpring("k", K=200.0, range=(0.047, 0.050025)), Damper("b", b=0.5)],
+                 [series("U", "R", "act"), series("m", "k", "b")], params=[L0])
+
+
+def _hydraulic():
+    """A flow source filling a cubic chamber whose pressure pushes a piston against a spring."""
+    return _spec("piston", [FlowSource("q"), Chamber("ch", k1=1e9, k2=7e14, k3=2e19), PressureTransducer("A", A=2e-5),
+                            Mass("m", m=0.02), LinearSpring("k", K=2000.0), Damper("b", b=2.0)],
+                 [parallel("q", "ch", "A.a"), series("A.b", "m", "k", "b")])
+
+
 CASES = {
     "CosseratRod": _rod_and_hydrogel,
     "HydrogelActuator": _rod_and_hydrogel,
@@ -297,6 +319,10 @@ CASES = {
     "PositionLoop": _position_loop,
     "PositionLoop(filtered)": _position_loop_filtered,
     "VelocityLoop": _velocity_loop,
+    "PeanoHasel": _peano_hasel,
+    "Chamber": _hydraulic,
+    "FlowSource": _hydraulic,
+    "PressureTransducer": _hydraulic,
 }
 MODELS = sorted(set(CASES.values()), key=lambda f: f.__name__)
 
@@ -326,7 +352,7 @@ def _point(data, s):
 
 
 def _input_scale(inp) -> float:
-    return {"V": 100.0, "A": 1e-3, "N": 1.0, "N*m": 1e-2}.get(inp.unit, 1.0)
+    return {"V": 100.0, "A": 1e-3, "N": 1.0, "N*m": 1e-2, "m**3/s": 1e-6}.get(inp.unit, 1.0)
 
 
 def test_every_component_is_covered():
