@@ -186,10 +186,12 @@ class Candidate(ABC):
                              f"possible: {points or 'none'}")
 
     def param(self, name: str, value: float, unit: str, description: str, rng) -> Param:
-        """A new parameter ``{effect}.{name}`` starting at ``value`` (moved inside ``rng`` if needed)."""
+        """A new parameter ``{effect}.{name}`` starting at ``value`` (moved inside ``rng`` if needed),
+        declared positive only when its whole range is (a sign-free one, such as a softening stiffness or
+        an offset, may be fitted below zero)."""
         lo, hi = float(rng[0]), float(rng[1])
         value = min(max(float(value), lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-        return Param(f"{self.effect}.{name}", value, unit, description, (lo, hi))
+        return Param(f"{self.effect}.{name}", value, unit, description, (lo, hi), positive=lo > 0)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
