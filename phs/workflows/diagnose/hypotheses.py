@@ -199,7 +199,7 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
         # plausible values span decades are screened from each of the candidate's starts
         best, recovery = fit_with_retries(
             fit_one, [{}] + [dict(st) for st in aug.starts], neutral=aug.neutral_start(),
-            target={k: system.param(k).value for k in aug.neutral}, bounds=aug.bounds, log_scale=aug.log_scale,
+            target={k: system.param(k).value for k in aug.free}, bounds=aug.bounds, log_scale=aug.log_scale,
             reference=0.5 * nominal.rss)
         h = score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
                   seconds=time.perf_counter() - t0, train_residuals=best.residuals)
