@@ -32,6 +32,10 @@ from phs.units import parse_unit
 
 _MECHANICAL_POSITION = ("m", "rad")
 
+NEGLIGIBLE = 1e-12
+"""Relative size of a parameter standing for zero where zero itself is refused (a parameter declared
+positive) or singular: its effect on a model is far below any integration tolerance."""
+
 
 # -- context: typical magnitudes ------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -127,10 +131,35 @@ class Augmentation:
     starts: tuple = ()
     """Alternative starting values ({parameter: value}) tried when screening, for parameters whose
     plausible values span decades (a retention capacitance, a time constant)."""
+    neutral: dict = field(default_factory=dict)
+    """Values of new parameters at which the augmented model is the nominal one (the element at zero
+    strength).  Where zero is refused (a parameter declared positive) or singular, a value whose
+    effect is negligible (:data:`NEGLIGIBLE` of its range's magnitude, or its inverse for an element
+    that vanishes as a parameter grows; possibly outside the search range).  Parameters not named do
+    not matter there.
+    Empty: unknown (a user candidate that does not say)."""
 
     @property
     def n_params(self) -> int:
         return len(self.free)
+
+    def neutral_start(self) -> dict:
+        """:attr:`neutral` moved inside :attr:`bounds` (a point a fit can start from).
+
+        Examples
+        --------
+        >>> from systems.examples import mass_spring_damper
+        >>> from components.candidates import CoulombFriction
+        >>> s = mass_spring_damper()
+        >>> aug = CoulombFriction().augment(s, "m.p", Scales.of(s))
+        >>> aug.neutral_start() == {"coulomb_friction.F_c": aug.bounds["coulomb_friction.F_c"][0]}
+        True
+        """
+        out = {}
+        for k, v in self.neutral.items():
+            lo, hi = self.bounds.get(k, (-np.inf, np.inf))
+            out[k] = float(min(max(v, lo), hi))
+        return out
 
 
 class Candidate(ABC):
@@ -157,10 +186,12 @@ class Candidate(ABC):
                              f"possible: {points or 'none'}")
 
     def param(self, name: str, value: float, unit: str, description: str, rng) -> Param:
-        """A new parameter ``{effect}.{name}`` starting at ``value`` (moved inside ``rng`` if needed)."""
+        """A new parameter ``{effect}.{name}`` starting at ``value`` (moved inside ``rng`` if needed),
+        declared positive only when its whole range is (a sign-free one, such as a softening stiffness or
+        an offset, may be fitted below zero)."""
         lo, hi = float(rng[0]), float(rng[1])
         value = min(max(float(value), lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-        return Param(f"{self.effect}.{name}", value, unit, description, (lo, hi))
+        return Param(f"{self.effect}.{name}", value, unit, description, (lo, hi), positive=lo > 0)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
@@ -351,6 +382,12 @@ def _smooth_abs(v: sp.Expr, eps: float) -> sp.Expr:
     return sp.sqrt(v**2 + sp.Float(eps) ** 2)
 
 
+def _zero(param) -> float:
+    """The value of ``param`` standing for zero: 0 itself, or for a parameter declared positive
+    :data:`NEGLIGIBLE` times the largest magnitude of its range."""
+    return 0.0 if not param.positive else NEGLIGIBLE * max(abs(param.range[0]), abs(param.range[1]))
+
+
 def _log_range(ref: float, lo: float, hi: float) -> tuple[float, float]:
     return (ref * lo, ref * hi)
 
@@ -379,11 +416,16 @@ class _AtStates(Candidate):
             x0.update(new)
         logs = [q.name for q in params if q.range[0] > 0 and q.range[1] / q.range[0] >= 100]
         return Augmentation(self.effect, where, self.component, s, [q.name for q in params], {q.name: q.range for q in params},
-                            logs, x0, starts=tuple(self.starts(params, scales)))
+                            logs, x0, starts=tuple(self.starts(params, scales)), neutral=self.neutral(params))
 
     def starts(self, params, scales) -> list[dict]:
         """Alternative starting values tried when screening (none by default)."""
         return []
+
+    def neutral(self, params) -> dict:
+        """Values of ``params`` at which the element vanishes (see :attr:`Augmentation.neutral`); by
+        default the first one, the element's strength, at zero (:func:`_zero`)."""
+        return {params[0].name: _zero(params[0])} if params else {}
 
 
 def _state_name(effect: str, local: str, tag: str) -> str:
@@ -409,6 +451,11 @@ class InputElement(Candidate):
     @abstractmethod
     def transform(self, t: np.ndarray, u: np.ndarray, theta) -> np.ndarray:
         """The input the model receives."""
+
+    def neutral(self, t, u) -> list | None:
+        """Parameter values (one per entry of :meth:`parameters`) at which :meth:`transform` passes the
+        input through unchanged, or None when unknown."""
+        return None
 
     def augment(self, system, where, scales):
         self._check_where(system, where)

@@ -36,6 +36,9 @@ class TimeDelay(InputElement):
     def transform(self, t, u, theta):
         return np.interp(t - float(theta[0]), t, u)
 
+    def neutral(self, t, u):
+        return [0.0]
+
 
 class InputSaturation(InputElement):
     """A saturation of the input at ``U_hi`` above and ``-U_lo`` below (possibly asymmetric), with
@@ -50,6 +53,11 @@ class InputSaturation(InputElement):
         hi = float(np.max(u)) if np.max(u) > 0 else float(np.max(np.abs(u))) or 1.0
         lo = float(-np.min(u)) if np.min(u) < 0 else float(np.max(np.abs(u))) or 1.0
         return [("U_hi", 1.05 * hi, 0.2 * hi, 1.05 * hi), ("U_lo", 1.05 * lo, 0.2 * lo, 1.05 * lo)]
+
+    def neutral(self, t, u):
+        # limits far above the peaks: the softplus corners underflow to exactly zero
+        peak = float(np.max(np.abs(u))) or 1.0
+        return [1e3 * peak, 1e3 * peak]
 
     def transform(self, t, u, theta):
         u = np.asarray(u, float)
@@ -77,6 +85,10 @@ class SlewRateLimit(InputElement):
         steepest = float(np.max(np.abs(np.diff(u) / np.diff(t)))) or span / float(t[-1] - t[0])
         lo = min(span / float(t[-1] - t[0]), 0.5 * steepest)
         return [("r", steepest, lo, steepest)]
+
+    def neutral(self, t, u):
+        # twice the command's steepest slope: the limiter never acts
+        return [2 * self.parameters(t, u)[0][3]]
 
     def transform(self, t, u, theta):
         r = float(theta[0])

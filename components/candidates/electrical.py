@@ -26,6 +26,7 @@ from __future__ import annotations
 import sympy as sp
 
 from components.candidates.base import (
+    NEGLIGIBLE,
     Augmentation,
     Candidate,
     _add_damping,
@@ -36,6 +37,7 @@ from components.candidates.base import (
     _rebuild,
     _same_dimension,
     _unit_of,
+    _zero,
     _zsyms,
     charge_states,
     stored_quantity_states,
@@ -72,7 +74,7 @@ class Leakage(Candidate):
         # held storage at once, and from there the fit cannot find the gentle decay of a slow leak
         starts = tuple({G.name: min(max(c_ref / (f * scales.duration), G.range[0] * 1.01), G.range[1] * 0.99)} for f in (0.3, 3.0))
         return Augmentation(self.effect, where, "conductance G_l across the storage", s, [G.name], {G.name: G.range}, [G.name],
-                            starts=starts)
+                            starts=starts, neutral={G.name: _zero(G)})
 
 
 class ChargeRetention(Candidate):
@@ -114,7 +116,8 @@ class ChargeRetention(Candidate):
             x0[name] = 0.0
         starts = tuple({C.name: f * c_ref, tau.name: tt} for f in (1e3, 1e5) for tt in (tau0, min(10 * tau0, tau.range[1] * 0.9)))
         return Augmentation(self.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the capacitor", s,
-                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], x0, starts=starts)
+                            [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], x0, starts=starts,
+                            neutral=_no_retention(C))
 
 
 def _charge_retention_at_input(cand, system, where, scales):
@@ -133,7 +136,13 @@ def _charge_retention_at_input(cand, system, where, scales):
     starts = tuple({C.name: f * c_ref, tau.name: tt} for f in (1e3, 1e5) for tt in (tau0, min(10 * tau0, tau.range[1] * 0.9)))
     return Augmentation(cand.effect, where, "RC branch (C_r ∥ R_r = tau/C_r) in series with the source", s,
                         [C.name, tau.name], {C.name: C.range, tau.name: tau.range}, [C.name, tau.name], {name: 0.0},
-                        starts=starts)
+                        starts=starts, neutral=_no_retention(C))
+
+
+def _no_retention(C) -> dict:
+    """The neutral point of a retention branch: ``C_r → ∞`` (its voltage ``Q_r/C_r`` vanishes while
+    ``Q̇_r = Q̇ − Q_r/tau`` keeps ``Q_r`` bounded; ``tau → 0`` would short it too but is stiff)."""
+    return {C.name: C.range[1] / NEGLIGIBLE}
 
 
 def _series_with_input(system, j: int, state: StateInfo, energy: sp.Expr, conductance: sp.Expr, params, effect):
@@ -211,7 +220,8 @@ class SeriesResistance(Candidate):
         r_ref = scales.get("level", where, 1.0) / (out_rms or 1.0)
         Ra = self.param("R_a", 0.02 * r_ref, "Ohm", f"series resistance at input {where}", _log_range(r_ref, 1e-5, 100.0))
         s = _series_resistor_at_input(system, j, Ra.symbol, [Ra], self.effect)
-        return Augmentation(self.effect, where, "resistor R_a in series with the input", s, [Ra.name], {Ra.name: Ra.range}, [Ra.name])
+        return Augmentation(self.effect, where, "resistor R_a in series with the input", s, [Ra.name], {Ra.name: Ra.range}, [Ra.name],
+                            neutral={Ra.name: _zero(Ra)})
 
 
 def _series_resistor_at_input(system, j: int, Ra: sp.Expr, params, effect):

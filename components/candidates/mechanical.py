@@ -118,7 +118,11 @@ class ViscoelasticCreep(_AtMomentum):
 
     New state ``δ`` (arm deflection), ``H += k_m δ²/2``, ``δ̇ = v − δ/tau``, force ``−k_m δ`` on the body:
     ``J[δ, p] = 1``, ``R[δ, δ] = 1/(k_m tau)``.  Together with the body's own spring it is a standard
-    linear solid: a step of force gives an instantaneous deflection and a slow creep."""
+    linear solid: a step of force gives an instantaneous deflection and a slow creep.
+
+    Neutral point: ``k_m → 0`` (``k_m = 0`` itself is singular, the damper's conductance being
+    ``1/(k_m tau)``): the arm's force ``k_m δ`` vanishes while ``δ`` stays bounded (``δ̇ = v − δ/tau``),
+    so a negligible ``k_m`` is the nominal model."""
 
     effect = "viscoelastic_creep"
     summary = "a slow creep/relaxation of the structure after each load change (viscoelasticity)"
@@ -149,7 +153,9 @@ class Hysteresis(_AtMomentum):
     New state ``z`` (elastic pre-sliding deflection), ``H += k_h z²/2``, element force ``k_h z`` on the
     body, and ``ż = (1 − eta k_h |z| / F_h) v − |v| k_h z / F_h``: loops whose shape does not depend on
     the rate, saturating near ``F_h``; ``eta`` skews them (Bouc-Wen's ``δ/γ``; ``eta = 0`` is Dahl's
-    model).  PH form: ``J[z, p] = 1 − eta k_h |z| / F_h`` (skew with ``J[p, z]``), ``R[z, z] = |v| / F_h ≥ 0``."""
+    model).  PH form: ``J[z, p] = 1 − eta k_h |z| / F_h`` (skew with ``J[p, z]``), ``R[z, z] = |v| / F_h ≥ 0``.
+    Neutral point: ``k_h → 0`` (a negligible ``k_h``): the element's force ``k_h z`` vanishes and ``z``
+    follows the displacement."""
 
     effect = "hysteresis"
     summary = "a rate-independent hysteresis loop in force vs. displacement (Dahl/Bouc-Wen friction, plasticity)"

@@ -15,7 +15,7 @@ Examples
 
 from __future__ import annotations
 
-from components.candidates.base import Augmentation, Candidate, _rebuild
+from components.candidates.base import Augmentation, Candidate, _rebuild, _zero
 from phs.params import Measured
 
 
@@ -38,5 +38,6 @@ class Offset(Candidate):
         measured = list(system.measured)
         measured[k] = Measured(mo.name, mo.expr + c.symbol, mo.unit, mo.description)
         s = _rebuild(system, measured=measured, params=[c], effect=self.effect)
-        return Augmentation(self.effect, where, "constant added to the reading", s, [c.name], {c.name: c.range}, [])
+        return Augmentation(self.effect, where, "constant added to the reading", s, [c.name], {c.name: c.range}, [],
+                            neutral={c.name: _zero(c)})
 

@@ -21,15 +21,27 @@ The parts, each importing only those listed after it: :mod:`~phs.workflows.diagn
 :mod:`~phs.workflows.diagnose.report` (words, figures, JSON and HTML),
 :mod:`~phs.workflows.diagnose.mismatch` (noise level, model signals, located mismatch),
 :mod:`~phs.workflows.diagnose.ranking` (scores, acceptance, choice),
-:mod:`~phs.workflows.diagnose.hypotheses` (fitting one model) and :mod:`~phs.workflows.diagnose.locate`.
+:mod:`~phs.workflows.diagnose.hypotheses` (fitting one model, never worse than its neutral point),
+:mod:`~phs.workflows.diagnose.retry` (retrying a failing fit) and :mod:`~phs.workflows.diagnose.locate`.
+
+A hypothesis is never lost: a failing fit is retried (neutral start, tighter bounds, continuation), a
+fit ending worse than the nominal model is replaced by its neutral point, and one that fails after every
+retry is named with its reason; each such failure scales the confidence by :data:`FAILED_FACTOR`.
 """
 
 from __future__ import annotations
 
 from phs.workflows.diagnose.mismatch import noise_level
-from phs.workflows.diagnose.ranking import FRICTION_LIKE, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SUFFICIENT_MARGIN, presliding_share
+from phs.workflows.diagnose.ranking import (
+           FAILED_FACTOR,
+           FRICTION_LIKE,
+           MIN_BIC_GAIN,
+           MIN_VALIDATION_GAIN,
+           SUFFICIENT_MARGIN,
+           presliding_share,
+)
 from phs.workflows.diagnose.result import Diagnosis
 from phs.workflows.diagnose.run import SPLIT, diagnose
 
 __all__ = ["diagnose", "Diagnosis", "noise_level", "presliding_share", "MIN_BIC_GAIN", "MIN_VALIDATION_GAIN", "SUFFICIENT_MARGIN",
-           "FRICTION_LIKE", "SPLIT"]
+           "FRICTION_LIKE", "FAILED_FACTOR", "SPLIT"]

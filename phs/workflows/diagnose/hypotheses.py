@@ -45,6 +45,8 @@ class Scored:
     reference_rss: float | None = None   # validation residual of the model this one extends, same data
     reference_bic: float | None = None
     notes: list = field(default_factory=list)  # sentences for the explanation (why it was chosen)
+    no_improvement: bool = False         # the fit could not beat the neutral point: it is the nominal model
+    recovery: str = ""                   # how a failing or worse fit was rescued (retries, neutral point)
 
     @property
     def ok(self) -> bool:
@@ -160,48 +162,100 @@ def train_result(h: Scored, data: Data):
     return h.simulated["train"]
 
 
-def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True) -> Scored:
-    """Fit the augmentation's parameters, together with the nominal free parameters when ``joint``,
-    starting from the nominal fit."""
+def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter: int | None = None) -> Scored:
+    """Fit the augmentation's parameters, together with the nominal free parameters, starting from the
+    nominal fit; screening (``joint=False``) fits loosely (at most 10 evaluations, ``max_iter`` to override).
+
+    A fit that fails is retried (:func:`~phs.workflows.diagnose.retry.fit_with_retries`: the neutral
+    point, tighter bounds, continuation); only when every retry fails is the hypothesis returned with
+    its ``error``.  A fit that ends worse on the training data than the neutral point (the new element
+    at zero strength with the nominal values: the nominal model itself) is replaced by that point,
+    marked ``no_improvement``."""
+    from phs.workflows.diagnose.retry import RECOVERABLE, FitFailed, fit_with_retries, reason
+
     t0 = time.perf_counter()
     label = f"{aug.effect}@{aug.attached_to}"
     try:
         if aug.element is not None:
-            return _fit_input_element(nominal, aug, data, t0, joint)
+            return _fit_input_element(nominal, aug, data, t0, joint, max_iter)
         system = aug.system.with_params({k: v for k, v in nominal.values.items() if k in aug.system.param_names})
         # screening fits the nominal parameters too (a new element often takes over part of what they
         # did: stiffness, damping), but loosely: it only has to rank the hypotheses
         free = list(data.free) + list(aug.free)
         x0 = dict(zip(nominal.system.state_names, map(float, nominal.x0), strict=True))
         x0.update(aug.x0)
-        bounds = {**(data.bounds or {}), **aug.bounds}
         # nominal parameters keep the nominal fit's log scaling; the new ones the candidate's choice
         nominal_log = list(data.log_scale) if data.log_scale else _default_log(system, data.free)
         log_scale = nominal_log + list(aug.log_scale)
+
+        def fit_one(start, new_bounds):
+            # the estimated initial states are estimated again: a new element changes what start explains the data
+            return identify(system.with_params(start) if start else system, data.recording, free,
+                            bounds={**(data.bounds or {}), **aug.bounds, **new_bounds}, x0=x0, outputs=data.outputs,
+                            log_scale=log_scale, rtol=data.rtol, max_iter=max_iter or (30 if joint else 10),
+                            ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0)
+
         # screening needs the gain to a few per cent, not the optimum to eight digits; parameters whose
         # plausible values span decades are screened from each of the candidate's starts
-        best = None
-        for start in [{}] + [dict(st) for st in aug.starts]:
-            try:
-                # the estimated initial states are estimated again: a new element changes what start explains the data
-                fit = identify(system.with_params(start) if start else system, data.recording, free, bounds=bounds, x0=x0,
-                               outputs=data.outputs, log_scale=log_scale, rtol=data.rtol, max_iter=30 if joint else 10,
-                               ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0)
-            except (PHSError, RuntimeError) as exc:
-                if best is None and start == {} and not aug.starts:
-                    raise
-                last_error = exc
-                continue
-            if best is None or fit.cost < best.cost:
-                best = fit
-        if best is None:
-            raise last_error
-        return score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
-                     seconds=time.perf_counter() - t0, train_residuals=best.residuals)
-    except (PHSError, RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        return Scored(label, aug.system, {}, nominal.x0, 0, {}, {}, math.inf, math.inf, math.inf, {}, {},
-                      time.perf_counter() - t0, aug, {}, msg)
+        best, recovery = fit_with_retries(
+            fit_one, [{}] + [dict(st) for st in aug.starts], neutral=aug.neutral_start(),
+            target={k: system.param(k).value for k in aug.free}, bounds=aug.bounds, log_scale=aug.log_scale,
+            reference=0.5 * nominal.rss)
+        h = score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
+                  seconds=time.perf_counter() - t0, train_residuals=best.residuals)
+        h.recovery = recovery
+        return _never_worse(nominal, h, aug, data, t0)
+    except FitFailed as exc:
+        msg = str(exc)
+    except RECOVERABLE as exc:
+        msg = reason(exc)
+    return Scored(label, aug.system, {}, nominal.x0, 0, {}, {}, math.inf, math.inf, math.inf, {}, {},
+                  time.perf_counter() - t0, aug, {}, msg)
+
+
+def _never_worse(nominal: Scored, h: Scored, aug, data: Data, t0: float) -> Scored:
+    """``h``, or the neutral point scored when ``h`` ends worse on the training data than the nominal
+    model (which the neutral point is): a nested model never loses to the model it extends."""
+    if h.rss <= nominal.rss:
+        return h
+    neutral = neutral_point(nominal, aug, data)
+    if neutral.rss > h.rss:
+        return h
+    neutral.seconds = time.perf_counter() - t0
+    neutral.no_improvement = True
+    neutral.recovery = (f"the fit ended worse than the nominal model (training residual {h.rss:.6g} against "
+                        f"{nominal.rss:.6g}); kept the neutral point")
+    return neutral
+
+
+def neutral_point(nominal: Scored, aug, data: Data) -> Scored:
+    """The augmented model at its neutral point (:attr:`~components.candidates.Augmentation.neutral`) with
+    the nominal values, scored: the nominal model again, up to the negligible remainder of the element.
+    A candidate without a neutral point (or an input element) gets the nominal model's own scores."""
+    import warnings
+
+    from phs.errors import ParameterRangeWarning
+
+    label = f"{aug.effect}@{aug.attached_to}"
+    n_params = len(data.free) + max(len(aug.free), aug.n_params)
+    if aug.element is not None or not aug.neutral:
+        theta = aug.element.neutral(data.recording.t, np.asarray(data.recording[aug.attached_to], float)) if aug.element else None
+        h = Scored(label, nominal.system, dict(nominal.values), nominal.x0, n_params, dict(nominal.fit_percent),
+                   dict(nominal.validation_fit_percent), nominal.rss, nominal.validation_rss, math.inf, nominal.residuals,
+                   dict(nominal.simulated), 0.0, aug)
+        if theta is not None:
+            specs = aug.element.parameters(data.recording.t, np.asarray(data.recording[aug.attached_to], float))
+            h.element_values = {f"{aug.element.effect}.{sp[0]}": float(v) for sp, v in zip(specs, theta, strict=True)}
+            h.n_params = len(data.free) + len(specs)
+        h.bic = nominal.bic + (h.n_params - nominal.n_params) * math.log(max(len(data.recording) * len(data.outputs), 1))
+        return h
+    values = {**{k: v for k, v in nominal.values.items() if k in aug.system.param_names}, **aug.neutral}
+    x0 = dict(zip(nominal.system.state_names, map(float, nominal.x0), strict=True))
+    x0.update(aug.x0)
+    with warnings.catch_warnings():  # a neutral value may lie outside the search range (a negligible strength)
+        warnings.simplefilter("ignore", ParameterRangeWarning)
+        return score(label, aug.system, values, [x0.get(n, 0.0) for n in aug.system.state_names], n_params, data,
+                     augmentation=aug)
 
 
 def _default_log(system, free) -> list:
@@ -213,9 +267,10 @@ def _default_log(system, free) -> list:
     return out
 
 
-def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool = True) -> Scored:
+def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool = True, max_iter: int | None = None) -> Scored:
     """Input elements: a bounded search of the element's parameters with the nominal parameters at their
-    fit (one simulation per trial), then a refit of the nominal parameters through the element."""
+    fit (one simulation per trial), never ending above the element's neutral point, then a refit of the
+    nominal parameters through the element (kept at the nominal values when the refit fails)."""
     import scipy.optimize
 
     el, where = aug.element, aug.attached_to
@@ -257,15 +312,24 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             theta[k] = float(r.x) if r.fun <= vals[b] else float(grid[b])
         else:
             theta[k] = float(grid[b])
+    neutral = el.neutral(rec.t, np.asarray(rec[where], float))
+    if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
+        theta = [float(v) for v in neutral]
     transformed = _transformed(rec, el, where, theta)
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
-    if not data.free and not data.estimate_x0:  # nothing of the model to refit through the element
-        values, x0 = dict(nominal.values), nominal.x0
-    else:
-        fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
-            zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
-            log_scale=data.log_scale or None, rtol=data.rtol, max_iter=30 if joint else 10, ftol=1e-6 if joint else 1e-3,
-            compile=None if joint else False, estimate_x0=data.estimate_x0)
-        values, x0 = fit.values, fit.x0
-    return score(f"{aug.effect}@{where}", nominal.system, values, x0, len(data.free) + len(specs), data,
-                 augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
+    values, x0, recovery = dict(nominal.values), nominal.x0, ""
+    if data.free or data.estimate_x0:  # refit the model through the element
+        from phs.workflows.diagnose.retry import RECOVERABLE, reason
+
+        try:
+            fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
+                zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
+                log_scale=data.log_scale or None, rtol=data.rtol, max_iter=max_iter or (30 if joint else 10),
+                ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0)
+            values, x0 = fit.values, fit.x0
+        except RECOVERABLE as exc:
+            recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the nominal values"
+    h = score(f"{aug.effect}@{where}", nominal.system, values, x0, len(data.free) + len(specs), data,
+              augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
+    h.recovery = recovery
+    return _never_worse(nominal, h, aug, data, t0)

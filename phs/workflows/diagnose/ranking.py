@@ -17,6 +17,9 @@ MIN_VALIDATION_GAIN = 0.01
 """Relative decrease of the validation residual needed to accept a hypothesis."""
 SUFFICIENT_MARGIN = 0.03
 """Hypotheses within this relative validation-residual margin of the best count as equally good."""
+FAILED_FACTOR = 0.9
+"""Each hypothesis whose fit failed (every retry included) multiplies the verdict's confidence by this:
+it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1."""
 FRICTION_LIKE = 0.05
 """A hysteresis loop whose saturated deflection ``F_h / (k_h (1 + eta))`` is below this share of the
 displacement's standard deviation is friction with a pre-sliding regime, not a loop of the material:

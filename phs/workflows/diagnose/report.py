@@ -13,7 +13,7 @@ import numpy as np
 
 from phs.io import write_atomic
 from phs.workflows.diagnose.mismatch import _features
-from phs.workflows.diagnose.ranking import _delta_bic, _gain
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, _delta_bic, _gain
 
 # which located findings speak for which effect (used to say where an effect showed)
 _EVIDENCE = {
@@ -77,6 +77,15 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
         out.append(f"Next best explanation: {rival.augmentation.effect} at {rival.augmentation.attached_to} "
                    f"(validation residual {100 * g:+.1f} %).")
     return " ".join(out)
+
+
+def failed_sentence(failed, scale: float) -> str:
+    """What the explanation says of hypotheses whose fit failed (empty when none did)."""
+    if not failed:
+        return ""
+    which = "; ".join(f"{h.augmentation.effect} at {h.augmentation.attached_to} ({h.error})" for h in failed)
+    return (f" Not ranked, because their fit failed after every retry: {which}. Any of them might explain the mismatch "
+            f"as well; the confidence is scaled by {scale:.3g} ({FAILED_FACTOR:g} per failed hypothesis).")
 
 
 def _png(fig) -> bytes:
@@ -231,7 +240,13 @@ def write_report(d, directory) -> None:
     for f in d.findings:
         page.append(f"<tr><td>{html.escape(f.kind)}</td><td>{html.escape(f.channel)}</td><td>{html.escape(f.where)}</td>"
                     f"<td>{f.strength:.4g}</td><td>{html.escape(f.meaning)}</td></tr>")
-    page.append("</table><h2>Summary</h2><pre>" + html.escape(text) + "</pre>")
+    page.append("</table>")
+    failed = d.verdict.get("failed", [])
+    if failed:
+        page.append("<h2>Failed hypotheses (missing from the ranking)</h2><table><tr><th>hypothesis</th><th>reason</th></tr>")
+        page += [f"<tr><td>{html.escape(f['hypothesis'])}</td><td>fit failed: {html.escape(f['error'])}</td></tr>" for f in failed]
+        page.append("</table>")
+    page.append("<h2>Summary</h2><pre>" + html.escape(text) + "</pre>")
     os.makedirs(directory, exist_ok=True)
     for name, data in figs.items():
         write_atomic(os.path.join(directory, name), data)

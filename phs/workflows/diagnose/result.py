@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phs.workflows.diagnose import report
-from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN, _delta_bic, _gain
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, _delta_bic, _gain
 
 
 @dataclass
@@ -56,7 +56,8 @@ class Diagnosis:
                               "validation_residual": h.validation_rss,
                               "validation_gain": _gain(self.nominal, h)},
                 "n_params": h.n_params, "accepted": any(h is a for a in self.accepted), "seconds": h.seconds,
-                **({"error": h.error} if h.error else {}),
+                "no_improvement": h.no_improvement,
+                **({"error": h.error} if h.error else {}), **({"recovery": h.recovery} if h.recovery else {}),
             }
 
         return {
@@ -86,14 +87,16 @@ class Diagnosis:
         for f in self.findings[:8]:
             lines.append(f"    [{f.kind}] {f.channel}: {f.where} (strength {f.strength:.3g})")
         lines.append("  hypotheses (best first):")
-        for h in self.hypotheses[:8]:
-            if h.error:
-                lines.append(f"    {h.label:<32} failed: {h.error}")
-                continue
+        for h in [h for h in self.hypotheses if h.ok][:8]:
             vf = ", ".join(f"{k} {x:.2f}" for k, x in h.validation_fit_percent.items())
             lines.append(f"    {h.label:<32} validation fit {vf}; ΔBIC {_delta_bic(self.nominal, h):+.1f}; "
                          f"gain {100 * _gain(self.nominal, h):+.1f} %" + (" (screening)" if h.stage != "full" else "")
+                         + (" (no improvement: the fit ended at the nominal model)" if h.no_improvement else "")
                          + ("  accepted" if any(h is a for a in self.accepted) else ""))
+        failed = self.verdict.get("failed", [])
+        if failed:
+            lines.append("  failed hypotheses (missing from the ranking):")
+            lines += [f"    {f['hypothesis']:<32} fit failed: {f['error']}" for f in failed]
         return "\n".join(lines)
 
     __str__ = summary
@@ -103,15 +106,22 @@ class Diagnosis:
         report.write_report(self, directory)
 
 
-def _verdict(nominal, accepted, hyps, findings, outs) -> dict:
+def _verdict(nominal, accepted, hyps, findings, outs, failed=()) -> dict:
+    """The verdict: effect, effects, explanation, confidence and the ``failed`` hypotheses (every round's;
+    each multiplies the confidence by :data:`~phs.workflows.diagnose.ranking.FAILED_FACTOR`)."""
     ok = [h for h in hyps if h.ok]
+    failed = list(failed) or [h for h in hyps if not h.ok]
+    lost = [{"hypothesis": h.label, "effect": h.augmentation.effect, "attached_to": h.augmentation.attached_to, "error": h.error}
+            for h in failed]
+    scale = FAILED_FACTOR ** len(lost)
+    tail = report.failed_sentence(failed, scale)
     if not accepted:
         best = ok[0] if ok else None
         g = _gain(nominal, best) if best else 0.0
         conf = float(np.clip(1.0 - max(g, 0.0) / (2 * MIN_VALIDATION_GAIN), 0.0, 1.0)) if best else 0.5
         conf = max(conf, 0.5) if (best is None or -_delta_bic(nominal, best) < MIN_BIC_GAIN) else conf
-        return {"effect": "none", "effects": [], "explanation": report.explanation(nominal, [], findings, best, outs),
-                "confidence": round(conf, 3)}
+        return {"effect": "none", "effects": [], "explanation": report.explanation(nominal, [], findings, best, outs) + tail,
+                "confidence": round(conf * scale, 3), "failed": lost}
     main = accepted[0]
     rivals = [h for h in ok if h.augmentation.effect != main.augmentation.effect]
     g_main = _gain(nominal, main)
@@ -119,5 +129,5 @@ def _verdict(nominal, accepted, hyps, findings, outs) -> dict:
     sep = (g_main - g_rival) / g_main if g_main > 0 else 0.0
     conf = float(np.clip(0.5 + 0.5 * sep, 0.0, 1.0))
     return {"effect": main.augmentation.effect, "effects": [a.augmentation.effect for a in accepted],
-            "explanation": report.explanation(nominal, accepted, findings, rivals[0] if rivals else None, outs),
-            "confidence": round(conf, 3)}
+            "explanation": report.explanation(nominal, accepted, findings, rivals[0] if rivals else None, outs) + tail,
+            "confidence": round(conf * scale, 3), "failed": lost}

@@ -162,7 +162,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if not pool:
             break
     final_findings = _locate(current, current.system, data, noise) if accepted else findings
-    verdict = _verdict(nominal, accepted, all_hyps, findings, outs)
+    verdict = _verdict(nominal, accepted, all_hyps, findings, outs, [h for r in rounds for h in r if not h.ok])
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, current, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings)
 

@@ -40,11 +40,13 @@ def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
 
 
 def _for_refit(h):
-    """A screened hypothesis' augmentation, started from its screening values for the joint refit."""
+    """A screened hypothesis' augmentation, started from its screening values (inside the new parameters'
+    bounds: a neutral point may lie outside them) for the joint refit."""
     aug = h.augmentation
     if aug.element is None:
-        aug = replace(aug, system=aug.system.with_params({k: v for k, v in h.values.items() if k in aug.system.param_names}),
-                      starts=())
+        values = {k: v for k, v in h.values.items() if k in aug.system.param_names}
+        values.update({k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) for k, v in values.items() if k in aug.bounds})
+        aug = replace(aug, system=aug.system.with_params(values), starts=())
     return aug
 
 
