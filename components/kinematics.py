@@ -35,7 +35,7 @@ from components._base import require_positive
 from phs.component import Component, Piece
 from phs.errors import ModelError
 from phs.params import EnergyTerm, Param, check_name, state_symbol
-from phs.safe_parse import register_function
+from phs.stored_expressions import register_function
 
 # -- M^-1 without symbolic inversion -----------------------------------------------------------------------
 

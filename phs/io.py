@@ -35,7 +35,7 @@ import sympy as sp
 
 from phs.errors import InputDataError, PHSError, UnitError
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo
-from phs.safe_parse import parse_srepr
+from phs.stored_expressions import parse_srepr
 from phs.units import parse_unit
 
 FORMAT = "phs.system"
@@ -276,7 +276,7 @@ _NUMBER = (int, float)
 def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
     """The PHSystem constructor's arguments held in a dictionary written by :func:`system_to_dict`.
 
-    Every expression is read by :func:`phs.safe_parse.parse_srepr` and every unit
+    Every expression is read by :func:`phs.stored_expressions.parse_srepr` and every unit
     by :func:`phs.units.parse_unit` (which knows the unit names): nothing in the
     dictionary is run.
 

@@ -12,3 +12,6 @@ from systems.peano_swimmer import peano_swimmer, swimmer_drive
 __all__ = ["rc_circuit", "rlc_circuit", "mass_spring_damper", "duffing_oscillator", "curling_hasel", "manta_ray_fin",
            "electrostatic_actuator", "msd_hasel", "hasel_platform", "hydrogel_arm", "peano_swimmer", "swimmer_drive",
            "catheter_bender", "volume_chirp"]
+
+#: the functions above that build a PHSystem (the others build its inputs: drives, chirps)
+MODELS = tuple(n for n in __all__ if n not in ("swimmer_drive", "volume_chirp"))

@@ -108,7 +108,8 @@ def test_exact_kelvin_voigt_R_is_psd_at_deformed_states():
 
 
 @pytest.mark.parametrize("kw, culprit", [
-    ({"n": 0}, "n"), ({"tip": "pinned"}, "tip"), ({"damping": "coulomb"}, "damping"), ({"couples": [9]}, "couples"), ({"couples": [(2, 1)]}, "couples"),
+    ({"n": 0}, "n"), ({"tip": "pinned"}, "tip"), ({"damping": "coulomb"}, "damping"), ({"couples": [9]}, "couples"),
+    ({"couples": [(2, 1)]}, "couples"),
     ({"distributed": ["z"]}, "'x' or 'y'"), ({"tau": -1.0}, "tau"), ({"E": -1.0}, "'E'"),
 ])
 def test_invalid_options_name_the_culprit(kw, culprit):

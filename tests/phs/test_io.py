@@ -211,7 +211,7 @@ def _every_system():
     import systems
     from systems import lab
 
-    found = {name: getattr(systems, name) for name in systems.__all__}
+    found = {name: getattr(systems, name) for name in systems.MODELS}
     found.update({name: f for name, f in vars(lab).items() if inspect.isfunction(f) and f.__module__ == lab.__name__
                   and not name.startswith("_")})
     return found

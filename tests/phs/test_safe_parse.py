@@ -18,10 +18,12 @@ import sympy as sp
 
 from phs import InputDataError, PHSystem, UnitError
 from phs.io import system_arguments, system_to_dict
-from phs.safe_parse import MAX_EXPONENT, Arithmetic, evaluate, parse_srepr
+from phs.safe_parse import MAX_EXPONENT, Arithmetic, evaluate
 from phs.signals import parse_expression
+from phs.stored_expressions import parse_srepr
 from phs.units import parse_unit, unit_expression
-from phs.workflows.cli import main, parse_scales
+from phs.workflows.cli import main
+from phs.workflows.cli_recordings import parse_scales
 from phs.workflows.inputs import input_signals
 from systems.examples import rc_circuit
 

@@ -13,10 +13,11 @@ import pytest
 import systems
 from codegen import generate, simulate
 from codegen._inputs import initial_state
-from phs.io import load_system, save_system
+from phs import load as load_system
+from phs.io import save_system
 
 
-@pytest.mark.parametrize("name", systems.__all__)
+@pytest.mark.parametrize("name", systems.MODELS)
 def test_default_initial_state_satisfies_every_validity_condition(name):
     s = getattr(systems, name)()
     x = initial_state(s, None)
