@@ -59,6 +59,7 @@ class Finding:
 
         Examples
         --------
+        >>> import numpy as np
         >>> Finding("drift", "y", "below 0.1 Hz", float("nan"), "share", {"f": np.float64(0.1)}).to_dict()["strength"] is None
         True
         """
