@@ -49,6 +49,21 @@ def load(path):
     return PHSystem.load(path)
 
 
+_LAZY = ("simulate", "identify", "diagnose", "sweep", "Recording")
+
+
+def __dir__():
+    """Module names, including the workflows loaded on first use, so tab completion finds them.
+
+    Examples
+    --------
+    >>> import phs
+    >>> {"simulate", "identify", "diagnose", "sweep", "Recording"} <= set(dir(phs))
+    True
+    """
+    return sorted(set(globals()) | set(_LAZY))
+
+
 def __getattr__(name):
     """Workflows are imported on first use, so ``import phs`` never imports casadi."""
     if name == "simulate":

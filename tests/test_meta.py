@@ -4,7 +4,8 @@
   and ``systems`` has a numpydoc docstring with an ``Examples`` section that
   shows code;
 * public constructors and entry points reject unknown keyword arguments;
-* ``import phs`` (the modelling core) does not import casadi.
+* ``import phs`` (the modelling core) does not import casadi, and ``dir(phs)``
+  lists the workflows it loads on first use.
 """
 
 from __future__ import annotations
@@ -168,6 +169,17 @@ def test_keyword_overrides_reject_unknown_names(rc):
 def test_importing_the_core_does_not_import_casadi():
     code = "import sys, phs, components, systems; sys.exit('casadi' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
+
+
+def test_dir_lists_the_lazy_workflows_without_importing_them():
+    """Tab completion finds ``phs.simulate`` and the other workflows; listing them imports nothing."""
+    code = ("import sys, phs; names = dir(phs); "
+            "assert {'simulate', 'identify', 'diagnose', 'sweep', 'Recording'} <= set(names), names; "
+            "assert names == sorted(names) and 'PHSystem' in names and 'load' in names; "
+            "assert 'casadi' not in sys.modules; "
+            "assert all(hasattr(phs, n) for n in phs.__all__)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
 
 
 def test_every_property_test_is_derandomized_and_writes_no_database():

@@ -18,6 +18,7 @@ import numpy as np
 from phs.errors import InputDataError
 from phs.signals import Sampled, Signal, parse_expression
 
+_HEADER_UNIT = re.compile(r"(.*\S)\s*\[([^\[\]]+)\]")
 _ASSIGN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)\s*=(?!=)(.*)$", re.S)
 
 
@@ -81,7 +82,10 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     Parameters
     ----------
     path : str or path-like
-        CSV file: a header row of column names, then one row per sample.
+        CSV file: a header row of column names, then one row per sample.  A
+        header cell ``name [unit]`` (as ``phs simulate --out`` writes them)
+        names the column ``name``; the unit must be the model's unit of that
+        input (``s`` for time), as values are not converted.
     system : PHSystem
         The model whose inputs are read.
     time_column : str
@@ -104,8 +108,9 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     ------
     InputDataError
         Naming the file, and the column and row where relevant: missing file,
-        missing time or input column, a cell that is not a number, NaN or
-        infinite values, time not strictly increasing, fewer than 2 rows.
+        missing time or input column, a column whose stated unit is not the
+        model's, a cell that is not a number, NaN or infinite values, time not
+        strictly increasing, fewer than 2 rows.
 
     Examples
     --------
@@ -117,6 +122,12 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     ...     t, u = read_input_csv(path, rc_circuit(), mapping={"volts": "U"})
     >>> t.tolist(), float(u["U"](0.5))
     ([0.0, 1.0], 1.0)
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = os.path.join(d, "u.csv")
+    ...     _ = open(path, "w").write("t [s],U [V]\\n0,0\\n1,2\\n")
+    ...     t, u = read_input_csv(path, rc_circuit())
+    >>> float(u["U"](0.5))
+    1.0
     """
     path = os.fspath(path)
     inputs = system.input_names
@@ -136,11 +147,17 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     wanted = {u: column_of.get(u, u) for u in inputs if u not in skip}
 
     header, rows = _read_rows(path)
+    header, file_units = _names_and_units(header, path)
     missing = [c for c in [time_column, *wanted.values()] if c not in header]
     if missing:
         c = missing[0]
         what = "time column" if c == time_column else f"column for input {_input_of(wanted, c)!r}"
         raise InputDataError(f"{path}: no {what} {c!r} (columns: {', '.join(header)})")
+    model_units = {time_column: "s", **{wanted[i.name]: i.unit for i in system.inputs if i.name in wanted}}
+    for c, unit in model_units.items():
+        if c in file_units and "".join(file_units[c].split()) != "".join(unit.split()):
+            raise InputDataError(f"{path}: column {c!r} is in {file_units[c]!r} but the model expects {unit!r}; "
+                                 f"write the values in {unit} or leave the unit out of the header")
     if len(rows) < 2:
         raise InputDataError(f"{path}: needs at least 2 data rows, found {len(rows)}")
     t = _column(path, header, rows, time_column)
@@ -205,6 +222,26 @@ def _read_rows(path: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
     if header is None:
         raise InputDataError(f"{path}: the file is empty (expected a header row naming the columns)")
     return header, rows
+
+
+def _names_and_units(header: list[str], path: str) -> tuple[list[str], dict[str, str]]:
+    """Column names without a trailing `` [unit]`` (as ``phs simulate`` writes them), and those units.
+
+    Examples
+    --------
+    >>> _names_and_units(["t [s]", "C.Q [C]", "volts"], "r.csv")
+    (['t', 'C.Q', 'volts'], {'t': 's', 'C.Q': 'C'})
+    """
+    names, units = [], {}
+    for cell in header:
+        m = _HEADER_UNIT.fullmatch(cell)
+        name = m.group(1).strip() if m else cell
+        if m:
+            units[name] = m.group(2).strip()
+        if name in names:
+            raise InputDataError(f"{path}: column {name!r} appears twice in the header")
+        names.append(name)
+    return names, units
 
 
 def _column(path: str, header: Sequence[str], rows, name: str) -> np.ndarray:

@@ -8,16 +8,13 @@ file, the column and the row (spreadsheet numbering: the header is row 1).
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from phs.errors import InputDataError, UnitError
 from phs.units import parse_unit
-from phs.workflows.inputs import _column, _read_rows, check_time
-
-_HEADER_UNIT = re.compile(r"(.*\S)\s*\[([^\[\]]+)\]")
+from phs.workflows.inputs import _column, _names_and_units, _read_rows, check_time
 
 # SI multipliers of the unit names a recording may use (dimensions are checked separately)
 _PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1e-9, "c": 1e-2}
@@ -287,22 +284,3 @@ class Recording:
                                  f"{system.name!r} ({', '.join(system.measured_names)})")
         return system.input_names, outs
 
-
-def _names_and_units(header: list[str], path: str) -> tuple[list[str], dict[str, str]]:
-    """Column names without a trailing `` [unit]`` (as ``phs simulate`` writes them), and those units.
-
-    Examples
-    --------
-    >>> _names_and_units(["t [s]", "C.Q [C]", "volts"], "r.csv")
-    (['t', 'C.Q', 'volts'], {'t': 's', 'C.Q': 'C'})
-    """
-    names, units = [], {}
-    for cell in header:
-        m = _HEADER_UNIT.fullmatch(cell)
-        name = m.group(1).strip() if m else cell
-        if m:
-            units[name] = m.group(2).strip()
-        if name in names:
-            raise InputDataError(f"{path}: column {name!r} appears twice in the header")
-        names.append(name)
-    return names, units

@@ -157,6 +157,9 @@ CASES = {
     "csv empty cell": (RC, lambda p: ["--input", _csv(p, "t,U\n0,1\n0.001,\n0.005,1\n")], ["row 3", "'U'", "empty"]),
     "csv one row": (RC, lambda p: ["--input", _csv(p, "t,U\n0,1\n")], ["u.csv", "at least 2"]),
     "csv too short": (RC, lambda p: ["--input", _csv(p, "t,U\n0,1\n0.001,1\n")], ["u.csv", "'t'", "0.001"]),
+    "csv unit not the model's": (RC, lambda p: ["--input", _csv(p, "t [s],U [kV]\n0,1\n0.005,1\n")],
+                                 ["u.csv", "'U'", "'kV'", "'V'"]),
+    "csv time not in seconds": (RC, lambda p: ["--input", _csv(p, "t [ms],U [V]\n0,1\n5,1\n")], ["u.csv", "'t'", "'ms'"]),
     "csv missing file": (RC, ["--input", "absent.csv"], ["absent.csv", "does not exist"]),
     "map unknown signal": (RC, lambda p: ["--input", _csv(p, "t,U\n0,1\n0.005,1\n"), "--map", "U=W"], ["'W'"]),
     "out directory missing": (RC, ["--out", "no/such/dir/res.csv"], ["no/such/dir"]),
@@ -209,6 +212,21 @@ def test_result_csv_reads_back_as_a_recording(tmp_path):
     _, data = read_csv(tmp_path / "res.csv")
     np.testing.assert_array_equal(rec["C.Q"], data[:, 1])
     assert rec.units["C.Q"] == "C" and rec.units["dissipated"] == "W"
+
+
+def test_result_csv_feeds_back_as_input(tmp_path):
+    """A CSV written by ``phs simulate --out`` (headers ``name [unit]``) is a valid ``--input``."""
+    first, second = tmp_path / "first", tmp_path / "second"
+    first.mkdir()
+    second.mkdir()
+    assert simulate(first, "--input", "sine(1.0, 100)", "--rtol", "1e-10", "--atol", "1e-10") == 0
+    assert simulate(second, "--input", str(first / "res.csv"), "--rtol", "1e-10", "--atol", "1e-10") == 0
+    assert csv_header(second / "res.csv") == RC_COLUMNS
+    header, a = read_csv(first / "res.csv")
+    _, b = read_csv(second / "res.csv")
+    u, q = header.index("U"), header.index("C.Q")
+    np.testing.assert_allclose(b[:, u], a[:, u], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b[:, q], a[:, q], rtol=0, atol=1e-3 * np.abs(a[:, q]).max())
 
 
 @pytest.mark.parametrize("args", [["--dt", "-1"], ["--t-end", "nan"], ["--rtol", "0"]], ids=str)
