@@ -5,6 +5,7 @@
 # Param declarations into docs/systems/msd_hasel_params.md (both into $PHS_DOCS_OUT instead when it is set: tests).
 
 # %%
+import itertools
 import os
 import sys
 import time
@@ -15,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from codegen import simulator  # noqa: E402
+from codegen import generate, simulator  # noqa: E402
 from phs import equilibrium  # noqa: E402
 from phs.signals import Piecewise, step  # noqa: E402
 from systems.msd_hasel import default_parameters, hasel_platform, msd_hasel  # noqa: E402
@@ -95,7 +96,9 @@ for m in (0.025, 0.05):
         x_prev = eq["x"]
         xs.append(x_prev)
     ax.plot(V_static, np.array(xs) * 1e3, "o-", ms=3, label=f"load m g = {m * 9.81:.3g} N")
-    print(f"m = {m} kg: x(0 kV) = {xs[0] * 1e3:.4f} mm, x(5 kV) = {xs[-1] * 1e3:.4f} mm")
+    print(f"m = {m} kg: x(0 kV) = {xs[0] * 1e3:.4f} mm, x(5 kV) = {xs[-1] * 1e3:.4f} mm, "
+          f"stroke {(xs[-1] - xs[0]) * 1e3:.4f} mm; x [mm] at "
+          + ", ".join(f"{V:g}" for V in V_static) + " kV: " + " ".join(f"{x * 1e3:.3f}" for x in xs))
 ax.set_xlabel("V [kV]")
 ax.set_ylabel("static displacement x [mm]")
 ax.legend()
@@ -158,3 +161,30 @@ ax[2].set_ylabel("relative tilt [deg]")
 ax[2].set_xlabel("t [s]")
 ax[2].legend(fontsize=8)
 save(fig, "msd_hasel_platform.png")
+
+# %% Scale of motion (docs/systems/msd_hasel.md): the end effector with all six actuators settled at 5 kV (b = 10 kg/s
+# only to settle quickly; the static pose does not depend on b), and the largest end-effector displacement the
+# linkage allows when every actuator may take any value of its 0 -> 5 kV stroke (vertices of the box of strokes)
+res6 = simulator(plat, rtol=1e-9).run(np.linspace(0.0, 1.0, 201), u={n: step(5e3, 0.05) for n in plat.input_names},
+                                      x0=rest, params={"b": 10.0})
+d6 = np.array([res6[f"ee.{c}"][-1] - res6[f"ee.{c}"][0] for c in "xyz"])
+print(f"all six at 5 kV: end effector moves {np.linalg.norm(d6) * 1e3:.3f} mm (x, y, z = "
+      + ", ".join(f"{v * 1e3:.3f}" for v in d6) + " mm)")
+STROKE = 0.969e-3  # largest 0 -> 5 kV stroke of one actuator over loads 0-4.4 N inside the validity domain (doc)
+ee_of = generate(plat).measured
+ee_idx = [plat.measured_names.index(f"ee.{c}") for c in "xyz"]
+x_idx = [i for i, n in enumerate(plat.state_names) if n.endswith(".x")]
+
+
+def ee_at(d):
+    """End effector [m] with the six actuators at displacements d (momenta zero)."""
+    x = np.zeros(len(plat.state_names))
+    x[x_idx] = d
+    return np.asarray(ee_of(x, np.zeros(len(plat.input_names)), plat.param_vector())).ravel()[ee_idx]
+
+
+x_rest = np.array([rest[plat.state_names[i]] for i in x_idx])
+reach = max(np.linalg.norm(ee_at(x_rest + STROKE * np.array(v)) - ee_at(x_rest))
+            for v in itertools.product((0.0, 1.0), repeat=6))
+print(f"largest end-effector displacement with every actuator anywhere in a {STROKE * 1e3:.3f} mm stroke: "
+      f"{reach * 1e3:.3f} mm (h_s / r_a = {plat.param('h_s').value / plat.param('r_a').value:.3f})")

@@ -250,3 +250,36 @@ def test_platform_kinetic_energy_is_the_rigid_plates_energy(platform):
         # central differences with eps = 1e-6 m on poses of size 1e-2 m: truncation error ~(eps/L)^2 ~ 1e-8 and
         # rounding ~1e-16/eps ~ 1e-10 relative; 1e-6 leaves margin and is far below any modelling error
         assert T_model == pytest.approx(T_ref, rel=1e-6)
+
+
+def test_single_actuator_stroke_stays_below_one_millimetre_under_any_measured_load():
+    # the scale of motion (docs): for every load from 0 to the 4.4 N of the cyclic tests, the stable equilibria of
+    # eq. 8 + eq. 10 inside the validity domain (x < 1.785 mm) move by less than 0.97 mm between 0 and 5 kV
+    x = np.linspace(-0.3, 1.785, 200001)
+    strokes = []
+    for load in np.linspace(0.0, 4.4, 89):
+        stable = []
+        for V in (0.0, 5.0):
+            f = printed_material(x) + printed_voltage_terms(x, V).sum(axis=0) - load
+            stable.append(x[np.nonzero((f[:-1] > 0) & (f[1:] <= 0))[0]])
+        if len(stable[0]) and len(stable[1]):
+            strokes.append(stable[1].max() - stable[0].min())
+    assert 0.85 < max(strokes) < 0.97
+
+
+def test_platform_heave_at_5_kV_is_the_sum_of_the_stages_strokes(platform):
+    # all six actuators at 5 kV: each at its single-actuator 5 kV equilibrium under its load share is the platform's
+    # rest state, and the end effector rises by the two stages' strokes (no lever in heave): 0.873 + 0.915 mm
+    fun, u, p = generate(platform), np.full(6, 5e3), platform.param_vector()
+    poses = {}
+    for V in (0.0, 5.0):
+        x = np.zeros(len(platform.state_names))
+        for k, plates in ((1, 2), (2, 1)):
+            for j in (1, 2, 3):
+                x[platform.state_names.index(f"s{k}.a{j}.x")] = printed_static_displacement(V, plates * M_PLATE * G / 3) * 1e-3
+        poses[V] = x
+    assert np.max(np.abs(np.asarray(fun.rhs(poses[5.0], u, p)).ravel())) <= 1e-9  # net forces [N], as for the rest
+    ee_z = platform.measured_names.index("ee.z")
+    dz = np.diff([np.asarray(fun.measured(poses[V], u, p)).ravel()[ee_z] for V in (0.0, 5.0)])[0]
+    rise = sum(poses[5.0][:6] - poses[0.0][:6]) / 3
+    assert dz == pytest.approx(rise, rel=1e-9) and dz == pytest.approx(1.788e-3, abs=1e-6)
