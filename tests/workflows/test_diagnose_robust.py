@@ -20,7 +20,8 @@ import sympy as sp
 from codegen import simulate
 from components.candidates import Augmentation, Candidate, CoulombFriction, Leakage, Offset, Scales, add_damping, charge_states
 from phs.workflows.diagnose import diagnose
-from phs.workflows.diagnose.hypotheses import Data, fit_augmented, fit_nominal
+from phs.workflows.diagnose.hypotheses import Data, fit_augmented
+from phs.workflows.diagnose.nominal import fit_nominal
 from phs.workflows.diagnose.retry import FitFailed, fit_with_retries
 from phs.workflows.recording import Recording
 from systems.examples import mass_spring_damper, rc_circuit
@@ -120,7 +121,7 @@ def _msd_data():
 
 def test_a_fit_forced_to_end_worse_reports_the_nominal_fit():
     s, data = _msd_data()
-    nominal = fit_nominal(s, data)
+    nominal, data = fit_nominal(s, data)
     aug = CoulombFriction().augment(s, "m.p", Scales.of(s))
     # a strong friction the data does not have, and one evaluation: the optimiser ends where it started
     bad = replace(aug, system=aug.system.with_params({"coulomb_friction.F_c": 1.5}), starts=())

@@ -12,7 +12,15 @@ from codegen import Simulator
 from phs.errors import PHSError
 from phs.signals import Sampled
 from phs.workflows.identify import identify, nrmse_fit
+from phs.workflows.identify.coordinates import CHANNEL_FLOOR
 from phs.workflows.recording import Recording
+
+SCREEN_ITER = 3
+"""Evaluations of a screening fit: a few Gauss-Newton steps of the joint problem (the candidate's new
+parameters *and* the nominal free parameters) from the nominal fit, so that an effect the nominal
+parameters absorbed is ranked on what it adds after they re-adjust.  Measured on the fifteen concealed
+cases of ``examples/concealed_effects.py`` (3 s recordings): the same verdicts as 10 evaluations, in
+two thirds of the time (``docs/workflows/diagnose.md``, "Screening")."""
 
 
 @dataclass
@@ -47,6 +55,8 @@ class Scored:
     notes: list = field(default_factory=list)  # sentences for the explanation (why it was chosen)
     no_improvement: bool = False         # the fit could not beat the neutral point: it is the nominal model
     recovery: str = ""                   # how a failing or worse fit was rescued (retries, neutral point)
+    same_physics: list = field(default_factory=list)  # labels it was preferred over as the same physics
+    starts: dict = field(default_factory=dict)         # nominal fit: starts tried, agreed, which one won
 
     @property
     def ok(self) -> bool:
@@ -68,6 +78,8 @@ class Data:
     x0: dict | None
     rtol: float = 1e-7
     estimate_x0: tuple = ()
+    weights: object = None     # channel weights of every fit: None (1 / std of the channel), "ml" or a dict;
+    #                            after the nominal fit, the dict it ended with (every hypothesis uses the same)
 
     @property
     def n_train(self) -> int:
@@ -88,29 +100,43 @@ def _simulate(system, rec: Recording, x0, params=None, sim=None):
     return sim.run(rec.t, u=u, x0=x0, params=params)
 
 
-def _channel_rss(rec: Recording, sims: dict, outputs, mask=None) -> tuple[float, dict]:
+def _channel_rss(rec: Recording, sims: dict, outputs, mask=None, weights=None) -> tuple[float, dict]:
+    """Weighted total residual (``Σ_ch w_ch² RSS_ch``; without a dict of weights ``w_ch = 1 / std`` of the
+    channel) and the per-channel residual sums of squares."""
     tot, per = 0.0, {}
     for ch in outputs:
         y, yh = np.asarray(rec[ch]), np.asarray(sims[ch])
         if mask is not None:
             y, yh = y[mask], yh[mask]
-        var = float(np.var(y)) or 1.0
         per[ch] = float(np.sum((y - yh) ** 2))
-        tot += per[ch] / var
+        w2 = weights[ch] ** 2 if isinstance(weights, dict) else 1.0 / (float(np.var(y)) or 1.0)
+        tot += per[ch] * w2
     return tot, per
 
 
-def bic(per_channel_rss: dict, n_samples: int, n_params: int) -> float:
-    """BIC of Gaussian residuals with one variance per channel: ``Σ_ch N ln(RSS_ch/N) + k ln(N·n_ch)``.
+def bic(per_channel_rss: dict, n_samples: int, n_params: int, floors: dict | None = None) -> float:
+    """BIC of Gaussian residuals with one variance per channel: ``Σ_ch N ln(max(RSS_ch/N, f_ch²)) + k ln(N·n_ch)``.
+
+    ``floors``: the smallest residual standard deviation each channel is credited with
+    (:data:`~phs.workflows.identify.coordinates.CHANNEL_FLOOR` of its standard deviation), so that a
+    channel fitted to its quantisation level does not decide the criterion by changes far below
+    anything physical.
 
     Examples
     --------
     >>> round(bic({"y": 1.0}, 100, 2), 3)
     -451.307
+    >>> bic({"y": 1e-12}, 100, 2, floors={"y": 1e-3}) == bic({"y": 1e-10}, 100, 2, floors={"y": 1e-3})
+    True
     """
     n_ch = max(len(per_channel_rss), 1)
-    s = sum(n_samples * math.log(max(v, 1e-300) / n_samples) for v in per_channel_rss.values())
+    floors = floors or {}
+    s = sum(n_samples * math.log(max(v / n_samples, floors.get(ch, 0.0) ** 2, 1e-300)) for ch, v in per_channel_rss.items())
     return float(s + n_params * math.log(n_samples * n_ch))
+
+
+def _floors(rec: Recording, outputs) -> dict:
+    return {ch: CHANNEL_FLOOR * float(np.std(np.asarray(rec[ch], float))) for ch in outputs}
 
 
 def score(label, system, values, x0, n_params, data: Data, *, augmentation=None, element=None, where="", theta=(),
@@ -129,27 +155,20 @@ def score(label, system, values, x0, n_params, data: Data, *, augmentation=None,
     else:
         tr = _simulate(fitted, rec, x0, sim=sim)
         sims = {ch: tr[ch] for ch in data.outputs}
-    rss, per = _channel_rss(rec, sims, data.outputs)
+    w = data.weights if isinstance(data.weights, dict) else None
+    rss, per = _channel_rss(rec, sims, data.outputs, weights=w)
     if val is rec or data.validation is data.recording:
         vsims = sims
     else:
         vr = _simulate(fitted, val, x0, sim=sim)
         vsims = {ch: vr[ch] for ch in data.outputs}
-    vrss, _ = _channel_rss(val, vsims, data.outputs, data.val_mask)
+    vrss, _ = _channel_rss(val, vsims, data.outputs, data.val_mask, weights=w)
     fits = {ch: nrmse_fit(rec[ch], sims[ch]) for ch in data.outputs}
     vfits = {ch: nrmse_fit(np.asarray(val[ch])[data.val_mask], np.asarray(vsims[ch])[data.val_mask]) for ch in data.outputs}
     res = {ch: np.asarray(rec[ch]) - sims[ch] for ch in data.outputs}
     return Scored(label, fitted, dict(values), np.asarray(x0, float), n_params, fits, vfits, rss, vrss,
-                  bic(per, len(rec), n_params), res, {"train": tr, "validation": vsims}, seconds, augmentation,
+                  bic(per, len(rec), n_params, _floors(rec, data.outputs)), res, {"train": tr, "validation": vsims}, seconds, augmentation,
                   dict(element_values or {}))
-
-
-def fit_nominal(system, data: Data, progress=None) -> Scored:
-    t0 = time.perf_counter()
-    fit = identify(system, data.recording, data.free, bounds=data.bounds or None, x0=data.x0, outputs=data.outputs,
-                   log_scale=data.log_scale or None, rtol=data.rtol, max_iter=60, estimate_x0=data.estimate_x0)
-    return score("nominal", system, fit.values, fit.x0, len(data.free), data, seconds=time.perf_counter() - t0,
-                 train_residuals=fit.residuals)
 
 
 def train_result(h: Scored, data: Data):
@@ -164,7 +183,7 @@ def train_result(h: Scored, data: Data):
 
 def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter: int | None = None) -> Scored:
     """Fit the augmentation's parameters, together with the nominal free parameters, starting from the
-    nominal fit; screening (``joint=False``) fits loosely (at most 10 evaluations, ``max_iter`` to override).
+    nominal fit; screening (``joint=False``) fits loosely (:data:`SCREEN_ITER` evaluations, ``max_iter`` to override).
 
     A fit that fails is retried (:func:`~phs.workflows.diagnose.retry.fit_with_retries`: the neutral
     point, tighter bounds, continuation); only when every retry fails is the hypothesis returned with
@@ -192,8 +211,9 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
             # the estimated initial states are estimated again: a new element changes what start explains the data
             return identify(system.with_params(start) if start else system, data.recording, free,
                             bounds={**(data.bounds or {}), **aug.bounds, **new_bounds}, x0=x0, outputs=data.outputs,
-                            log_scale=log_scale, rtol=data.rtol, max_iter=max_iter or (30 if joint else 10),
-                            ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0)
+                            log_scale=log_scale, rtol=data.rtol, max_iter=max_iter or (30 if joint else SCREEN_ITER),
+                            ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0,
+                            weights=_fixed(data.weights))
 
         # screening needs the gain to a few per cent, not the optimum to eight digits; parameters whose
         # plausible values span decades are screened from each of the candidate's starts
@@ -258,6 +278,12 @@ def neutral_point(nominal: Scored, aug, data: Data) -> Scored:
                      augmentation=aug)
 
 
+def _fixed(weights):
+    """The weights a hypothesis fits with: the nominal fit's (a dict), never re-estimated per hypothesis
+    (its cost must be comparable with the nominal model's)."""
+    return weights if isinstance(weights, dict) else None
+
+
 def _default_log(system, free) -> list:
     out = []
     for k in free:
@@ -278,7 +304,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     specs = el.parameters(rec.t, np.asarray(rec[where], float))
     sim = Simulator(nominal.system, energy=False)
     outs = data.outputs
-    var = {ch: float(np.var(rec[ch])) or 1.0 for ch in outs}
+    w2 = {ch: (data.weights[ch] ** 2 if isinstance(data.weights, dict) else 1.0 / (float(np.var(rec[ch])) or 1.0)) for ch in outs}
 
     def cost(theta):
         r = _transformed(rec, el, where, theta)
@@ -286,7 +312,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             s = _simulate(nominal.system, r, nominal.x0, sim=sim)
         except (PHSError, RuntimeError):
             return math.inf
-        return sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) / var[ch] for ch in outs)
+        return sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
 
     theta = [s[1] for s in specs]
     for k, (_name, _start, lo, hi) in enumerate(specs):
@@ -324,8 +350,9 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         try:
             fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
                 zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
-                log_scale=data.log_scale or None, rtol=data.rtol, max_iter=max_iter or (30 if joint else 10),
-                ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0)
+                log_scale=data.log_scale or None, rtol=data.rtol, max_iter=max_iter or (30 if joint else SCREEN_ITER),
+                ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0,
+                weights=_fixed(data.weights))
             values, x0 = fit.values, fit.x0
         except RECOVERABLE as exc:
             recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the nominal values"

@@ -20,6 +20,9 @@ SUFFICIENT_MARGIN = 0.03
 FAILED_FACTOR = 0.9
 """Each hypothesis whose fit failed (every retry included) multiplies the verdict's confidence by this:
 it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1."""
+SCREENED_CAP = 0.9
+"""Highest confidence of a verdict while a rival that explains part of the mismatch was only screened
+(a loose fit: its gain after a fit to convergence is not known)."""
 FRICTION_LIKE = 0.05
 """A hysteresis loop whose saturated deflection ``F_h / (k_h (1 + eta))`` is below this share of the
 displacement's standard deviation is friction with a pre-sliding regime, not a loop of the material:
@@ -58,11 +61,21 @@ def _pick(nominal, hyps, data=None):
                     and h.augmentation.attached_to == pick.augmentation.attached_to]
         if share is not None and share < FRICTION_LIKE and friction:
             f = friction[0]
+            f.same_physics.append(pick.label)
             f.notes.append(f"A hysteresis element at {pick.augmentation.attached_to} fits a little better (validation residual "
                            f"{100 * _gain(nominal, pick):+.1f} % against {100 * _gain(nominal, f):+.1f} %), but its loop closes "
                            f"within {100 * share:.2g} % of the motion's standard deviation: that is the pre-sliding regime of "
                            f"friction, not a hysteresis of the material, and smooth Coulomb friction describes it with fewer parameters.")
-            return f
+            pick = f
+    if data is not None and pick.augmentation.effect == "coulomb_friction":
+        # a hysteresis element at the same place whose loop closes in the pre-sliding regime is the same
+        # physics described with more parameters: not a rival of the friction
+        for h in hyps:
+            if (h.ok and h.augmentation.effect == "hysteresis" and h.augmentation.attached_to == pick.augmentation.attached_to
+                    and h.label not in pick.same_physics):
+                share = presliding_share(nominal, h, data)
+                if share is not None and share < FRICTION_LIKE:
+                    pick.same_physics.append(h.label)
     return pick
 
 

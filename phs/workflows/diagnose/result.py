@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phs.workflows.diagnose import report
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, _delta_bic, _gain
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain
 
 
 @dataclass
@@ -34,6 +34,17 @@ class Diagnosis:
     def effect(self) -> str:
         """The main effect's name, or ``"none"``."""
         return self.verdict["effect"]
+
+    @property
+    def weights(self) -> dict:
+        """The channel weights every fit and score used (see ``diagnose(weights=)``): ``1 / std`` of each
+        training channel by default, ``1 / sigma`` (the nominal fit's residual RMS, floored) with ``"ml"``."""
+        if self.data is None:
+            return {}
+        w = self.data.weights
+        if isinstance(w, dict):
+            return dict(w)
+        return {ch: 1.0 / (float(np.std(np.asarray(self.data.recording[ch], float))) or 1.0) for ch in self.outputs}
 
     @property
     def final_system(self):
@@ -63,8 +74,9 @@ class Diagnosis:
         return {
             "system": self.system.name, "model_hash": self.system.model_hash(), "outputs": self.outputs,
             "baseline": {"fit_percent": self.nominal.fit_percent, "validation_fit_percent": self.nominal.validation_fit_percent,
-                         "parameters": self.nominal.values, "bic": self.nominal.bic},
+                         "parameters": self.nominal.values, "bic": self.nominal.bic, "starts": self.nominal.starts},
             "noise": self.noise,
+            "weights": self.weights,
             "mismatch": [f.to_dict() for f in self.findings],
             "hypotheses": [hyp(h, i + 1) for i, h in enumerate(self.hypotheses)],
             "verdict": self.verdict,
@@ -83,6 +95,13 @@ class Diagnosis:
         for ch in self.outputs:
             lines.append(f"    {ch}: nominal {self.nominal.fit_percent[ch]:.2f} / {self.nominal.validation_fit_percent[ch]:.2f}"
                          f"  ->  final {self.final.fit_percent[ch]:.2f} / {self.final.validation_fit_percent[ch]:.2f}")
+        st = self.nominal.starts
+        if st:
+            lines.append(f"  nominal fit: {st['agreed']} of {st['tried']} starts agree (training cost within 1 %), "
+                         f"best from {st['best']}")
+        if self.weights:
+            lines.append("  channel weights: "
+                         + ", ".join(f"{ch} {w:.3g}" for ch, w in self.weights.items()))
         lines.append("  located mismatch:")
         for f in self.findings[:8]:
             lines.append(f"    [{f.kind}] {f.channel}: {f.where} (strength {f.strength:.3g})")
@@ -123,11 +142,14 @@ def _verdict(nominal, accepted, hyps, findings, outs, failed=()) -> dict:
         return {"effect": "none", "effects": [], "explanation": report.explanation(nominal, [], findings, best, outs) + tail,
                 "confidence": round(conf * scale, 3), "failed": lost}
     main = accepted[0]
-    rivals = [h for h in ok if h.augmentation.effect != main.augmentation.effect]
+    # rivals: other effects, except those the choice judged to be the same physics (a pre-sliding loop)
+    rivals = [h for h in ok if h.augmentation.effect != main.augmentation.effect and h.label not in main.same_physics]
     g_main = _gain(nominal, main)
     g_rival = max([_gain(nominal, h) for h in rivals] + [0.0])
     sep = (g_main - g_rival) / g_main if g_main > 0 else 0.0
     conf = float(np.clip(0.5 + 0.5 * sep, 0.0, 1.0))
+    if any(h.stage != "full" and _gain(nominal, h) > 0 for h in rivals):
+        conf = min(conf, SCREENED_CAP)  # a rival that explains something was only screened
     return {"effect": main.augmentation.effect, "effects": [a.augmentation.effect for a in accepted],
             "explanation": report.explanation(nominal, accepted, findings, rivals[0] if rivals else None, outs) + tail,
             "confidence": round(conf * scale, 3), "failed": lost}

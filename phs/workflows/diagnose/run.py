@@ -21,7 +21,7 @@ SPLIT = 0.7
 
 def diagnose(system, recording, *, validation=None, free=None, outputs=None, candidates=None, x0=None, bounds=None,
              log_scale=None, max_effects: int = 2, n_jobs: int | None = None, progress: bool = False, rtol: float = 1e-7,
-             refit_top: int = 3, estimate_x0=()) -> Diagnosis:
+             refit_top: int = 3, estimate_x0=(), weights=None) -> Diagnosis:
     """Find where ``system`` and ``recording`` disagree, which physics is missing, and the fixed model.
 
     Parameters
@@ -51,10 +51,19 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     n_jobs : int, optional
         Processes fitting hypotheses in parallel (default: the number of CPUs, at most 4).
     refit_top : int
-        Every hypothesis is first screened by a loose fit (at most 10 evaluations); the ``refit_top``
+        Every hypothesis is first screened by a loose joint fit (a few evaluations); the ``refit_top``
         most promising are then refitted to convergence (0: every hypothesis is fitted to convergence).
     progress : bool
         Print one line per fitted hypothesis on stderr.
+    weights : None, "ml" or dict
+        Channel weights of every fit and score.  None (default): ``1 / std`` of each measured channel
+        (channels count alike whatever their units and noise).  ``"ml"``: maximum likelihood with one
+        unknown noise variance per channel, estimated by the nominal fit (iteratively re-weighted, each
+        channel's residual floored at :data:`~phs.workflows.identify.coordinates.CHANNEL_FLOOR` of its
+        standard deviation so that a channel at quantisation level does not drown the others) and then
+        kept for every hypothesis.  A dict: fixed weights per channel.  The BIC floors every channel at
+        the same share whatever the weights.  The weights used are in ``Diagnosis.weights`` and the
+        report; ``docs/workflows/diagnose.md`` ("Channel weights") compares the two on the concealed cases.
 
     Returns
     -------
@@ -73,7 +82,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     'offset'
     """
     from components.candidates import LIBRARY, Scales
-    from phs.workflows.diagnose.hypotheses import Data, fit_nominal, train_result
+    from phs.workflows.diagnose.hypotheses import Data, train_result
+    from phs.workflows.diagnose.nominal import fit_nominal
 
     wall = time.perf_counter()
     if n_jobs is None:
@@ -97,17 +107,19 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             raise InputDataError(f"{recording.source}: too short to split into training and validation ({len(recording)} samples)")
         train = recording.window(t[0], at)
         data = Data(train, recording, t > at, t <= at, outs, free, dict(bounds or {}), list(log_scale or []), x0, rtol,
-                    tuple(estimate_x0))
+                    tuple(estimate_x0), weights)
     else:
         validation.check_for(system, outs)
         data = Data(recording, validation, np.ones(len(validation), bool), None, outs, free, dict(bounds or {}),
-                    list(log_scale or []), x0, rtol, tuple(estimate_x0))
+                    list(log_scale or []), x0, rtol, tuple(estimate_x0), weights)
     noise = {ch: noise_level(recording[ch]) for ch in outs}
     cands = list(LIBRARY if candidates is None else candidates)
 
     if progress:
         print(f"diagnose {system.name}: fitting the nominal model ({', '.join(free)})", file=sys.stderr, flush=True)
-    nominal = fit_nominal(system, data)
+    if not (weights is None or weights == "ml" or isinstance(weights, dict)):
+        raise ParameterError(f"diagnose: weights must be 'ml', None or a dict of channel weights, got {weights!r}")
+    nominal, data = fit_nominal(system, data)
     findings = _locate(nominal, system, data, noise)
     current, accepted, all_hyps, rounds = nominal, [], [], []
     pool = cands

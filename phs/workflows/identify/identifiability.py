@@ -113,7 +113,8 @@ def analyse(J: np.ndarray, D: np.ndarray, tol: float):
     n = Jr.shape[1]
     if Jr.size == 0 or not np.all(np.isfinite(Jr)):
         return np.full((n, n), np.nan), np.zeros((n, n)), 0
-    _, s, Vt = np.linalg.svd(Jr, full_matrices=True)
+    # the thin SVD when there are at least as many rows as columns (U of a long Jacobian is never built)
+    _, s, Vt = np.linalg.svd(Jr, full_matrices=Jr.shape[0] < n)
     s = np.concatenate([s, np.zeros(n - len(s))])
     keep = s > tol * s[0] if s[0] > 0 else np.zeros(n, dtype=bool)
     Vr, Vn = Vt[keep].T, Vt[~keep].T
@@ -217,7 +218,9 @@ def combinations(P, cov_rel, free, values, units) -> tuple[list, list]:
                 exps = {free[i]: e for i, e in zip(g, row, strict=True) if e != 0}
                 a = np.array([float(e) for e in row])
                 pv = np.array([values[free[i]] for i in g], dtype=float)
-                value = float(np.prod(pv ** a)) if np.all(pv > 0) else float("nan")
+                # in logs: a product of large exponents of small values neither overflows nor underflows to a warning
+                log_value = float(a @ np.log(pv)) if np.all(pv > 0) else float("nan")
+                value = float(np.exp(log_value)) if -745.0 < log_value < 709.0 else float("nan")
                 if out is ident and math.isfinite(value):
                     se = float(np.sqrt(max(a @ cov_rel[np.ix_(g, g)] @ a, 0.0)))
                     spread = float(np.exp(min(1.96 * se, 700.0)))

@@ -16,10 +16,13 @@ import scipy.optimize
 from codegen.simulator import Simulator, simulate
 from phs.errors import InputDataError, ParameterError, PHSError, SimulationError
 from phs.signals import Sampled
-from phs.workflows.identify.coordinates import _bounds, _channel_weights, _log_scaled
+from phs.workflows.identify.coordinates import _bounds, _channel_weights, _log_scaled, ml_weights
 from phs.workflows.identify.result import IdentificationResult, _uncertainty
 from phs.workflows.identify.scoring import _simulate_outputs, nrmse_fit
 from phs.workflows.identify.sensitivities import _Problem
+
+ML_PASSES = 3
+"""Most re-weighted refits of ``identify(..., weights="ml")`` after the first fit."""
 
 
 def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, weights=None, log_scale=None,
@@ -41,9 +44,13 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         Initial state (default: the simulator's default).
     outputs : sequence of str, optional
         Measured outputs (or port outputs, states) to fit; default every one in the recording.
-    weights : dict of str -> float, optional
+    weights : dict of str -> float, or "ml", optional
         Weight per channel; default ``1 / std`` of the measured channel (channels in different
-        units count alike).
+        units count alike).  ``"ml"``: maximum likelihood with one unknown noise variance per channel,
+        by iterative re-weighting (``1 / sigma`` with ``sigma`` each channel's residual RMS, floored at
+        :data:`~phs.workflows.identify.coordinates.CHANNEL_FLOOR` of its standard deviation; at most
+        :data:`ML_PASSES` refits, until no weight moves by more than 10 %); the result's ``weights`` are
+        the final ones.
     log_scale : sequence of str, optional
         Parameters fitted in log scale; default those whose declared range spans >= 1.5 decades.
     estimate_x0 : sequence of str
@@ -92,6 +99,12 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     >>> round(fit.values["R.R"])
     2000
     """
+    if isinstance(weights, str):
+        if weights != "ml":
+            raise ParameterError(f"identify: weights must be a dict of channel weights or 'ml', got {weights!r}")
+        return _identify_ml(system, recording, free, bounds=bounds, x0=x0, outputs=outputs, log_scale=log_scale,
+                            estimate_x0=estimate_x0, validation=validation, initial=initial, rtol=rtol, atol=atol,
+                            max_iter=max_iter, ftol=ftol, shooting=shooting, progress=progress, compile=compile)
     wall = _time.perf_counter()
     free = list(free)
     if not free and not estimate_x0:
@@ -194,3 +207,24 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     if validation is not None:
         result.validate(validation)
     return result
+
+
+def _identify_ml(system, recording, free, *, x0, outputs, initial, validation, **kw) -> IdentificationResult:
+    """``identify`` with maximum-likelihood channel weights (iteratively re-weighted, floored)."""
+    wall = _time.perf_counter()
+    res = first = identify(system, recording, free, x0=x0, outputs=outputs, initial=initial, **kw)
+    iterations = res.iterations
+    for _ in range(ML_PASSES):
+        w = ml_weights(res.residuals, recording, res.outputs)
+        if all(abs(w[ch] / res.weights[ch] - 1.0) <= 0.1 for ch in res.outputs):
+            break
+        start = dict(initial or {})
+        start.update(res.values)
+        nxt = identify(system, recording, free, x0=res.x0, outputs=res.outputs, initial=start, weights=w, **kw)
+        res = nxt
+        iterations += res.iterations
+    res.initial, res.iterations = first.initial, iterations
+    res.seconds = _time.perf_counter() - wall
+    if validation is not None:
+        res.validate(validation)
+    return res

@@ -1,0 +1,107 @@
+"""The nominal fit of a diagnosis, from several starts: every later comparison is measured from it, so it
+must not stop at a worse optimum than a plain least-squares fit of the same parameters would reach.
+
+Starts: the values the model was built with, and the best of :data:`GLOBAL_SAMPLES` points of a scrambled
+Sobol sample over the free parameters' declared ranges (log-uniform where a range spans decades), each
+scored by one simulation (a cheap global step).  Each start is fitted by output error; the best training
+cost wins, and the report says how many starts agreed with it (ended within :data:`AGREE` of its cost).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from codegen import Simulator
+from phs.errors import PHSError
+from phs.workflows.identify import identify
+
+GLOBAL_SAMPLES = 8
+"""Points of the global step (a scrambled Sobol sample of the free parameters' ranges, fixed seed)."""
+AGREE = 0.01
+"""Starts whose fitted training cost is within this relative margin of the best one agree with it."""
+
+
+def fit_nominal(system, data):
+    """The nominal fit, scored, and ``data`` with the channel weights it ended with (``data.weights``
+    ``"ml"``: maximum likelihood, :func:`phs.workflows.identify.identify` with ``weights="ml"``), which
+    every hypothesis then fits and is scored with.  ``Scored.starts``: ``{"tried", "agreed", "best"}``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from codegen import simulate
+    >>> from systems.examples import rc_circuit
+    >>> from phs.workflows.recording import Recording
+    >>> from phs.workflows.diagnose.hypotheses import Data
+    >>> t = np.linspace(0, 0.02, 401); u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
+    >>> rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc_circuit(R=2e3), t, u={"U": u})["v_C"]})
+    >>> h, data = fit_nominal(rc_circuit(), Data(rec, rec, np.ones(401, bool), None, ["v_C"], ["R.R"], {}, [], None))
+    >>> round(h.values["R.R"]), h.starts["tried"], h.starts["agreed"]
+    (2000, 2, 2)
+    """
+    from phs.workflows.diagnose.hypotheses import score
+    from phs.workflows.diagnose.retry import RECOVERABLE
+
+    t0 = time.perf_counter()
+    starts = [("the model's values", {})] + [("a global sample", s) for s in global_starts(system, data, 1)]
+    fits, errors = [], []
+    for label, start in starts:
+        try:
+            fit = identify(system.with_params(start) if start else system, data.recording, data.free,
+                           bounds=data.bounds or None, x0=data.x0, outputs=data.outputs, log_scale=data.log_scale or None,
+                           rtol=data.rtol, max_iter=60, estimate_x0=data.estimate_x0, weights=data.weights)
+        except RECOVERABLE as exc:
+            if not start:
+                errors.append(exc)
+            continue
+        fits.append((label, fit))
+    if not fits:
+        raise errors[0]
+    w = dict(fits[0][1].weights)  # every start's residual measured with the same weights
+    costs = [sum(float(np.sum(np.asarray(f.residuals[ch]) ** 2)) * w[ch] ** 2 for ch in data.outputs) for _, f in fits]
+    k = int(np.argmin(costs))
+    label, fit = fits[k]
+    agreed = sum(1 for c in costs if c <= costs[k] * (1 + AGREE) + 1e-300)
+    data = replace(data, weights=dict(fit.weights)) if data.weights is not None else data
+    h = score("nominal", system, fit.values, fit.x0, len(data.free), data, seconds=time.perf_counter() - t0,
+              train_residuals=fit.residuals)
+    h.starts = {"tried": len(starts), "agreed": agreed, "best": label}
+    return h, data
+
+
+def global_starts(system, data, n: int) -> list[dict]:
+    """The ``n`` best points of a scrambled Sobol sample (:data:`GLOBAL_SAMPLES` points, seed 0) over the
+    free parameters' bounds, each scored by one simulation of the training recording (points whose
+    simulation fails are dropped); log-uniform for parameters whose range spans 1.5 decades or more."""
+    from scipy.stats import qmc
+
+    from phs.workflows.diagnose.hypotheses import _simulate
+
+    if not data.free or n <= 0:
+        return []
+    bounds = [tuple((data.bounds or {}).get(k, system.param(k).range or (None, None))) for k in data.free]
+    if any(lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)) or lo >= hi for lo, hi in bounds):
+        return []
+    unit = qmc.Sobol(d=len(data.free), scramble=True, seed=0).random(GLOBAL_SAMPLES)
+    rec, outs = data.recording, data.outputs
+    w2 = {ch: (data.weights[ch] ** 2 if isinstance(data.weights, dict) else 1.0 / (float(np.var(rec[ch])) or 1.0)) for ch in outs}
+    x0 = data.x0
+    sim = Simulator(system, energy=False)
+    scored = []
+    for row in unit:
+        start = {}
+        for k, (lo, hi), f in zip(data.free, bounds, row, strict=True):
+            start[k] = float(lo * (hi / lo) ** f) if lo > 0 and hi / lo >= 10**1.5 else float(lo + f * (hi - lo))
+        try:
+            s = _simulate(system, rec, x0, params=start, sim=sim)
+        except (PHSError, RuntimeError):
+            continue
+        cost = sum(float(np.sum((np.asarray(rec[ch]) - np.asarray(s[ch])) ** 2)) * w2[ch] for ch in outs)
+        if math.isfinite(cost):
+            scored.append((cost, start))
+    scored.sort(key=lambda cs: cs[0])
+    return [s for _, s in scored[:n]]
