@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phs.workflows.diagnose import report
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain, calibrated
 
 
 @dataclass
@@ -140,16 +140,17 @@ def _verdict(nominal, accepted, hyps, findings, outs, failed=()) -> dict:
         conf = float(np.clip(1.0 - max(g, 0.0) / (2 * MIN_VALIDATION_GAIN), 0.0, 1.0)) if best else 0.5
         conf = max(conf, 0.5) if (best is None or -_delta_bic(nominal, best) < MIN_BIC_GAIN) else conf
         return {"effect": "none", "effects": [], "explanation": report.explanation(nominal, [], findings, best, outs) + tail,
-                "confidence": round(conf * scale, 3), "failed": lost}
+                "confidence": round(calibrated(conf, "none") * scale, 3), "score": round(conf, 4), "failed": lost}
     main = accepted[0]
     # rivals: other effects, except those the choice judged to be the same physics (a pre-sliding loop)
     rivals = [h for h in ok if h.augmentation.effect != main.augmentation.effect and h.label not in main.same_physics]
     g_main = _gain(nominal, main)
     g_rival = max([_gain(nominal, h) for h in rivals] + [0.0])
     sep = (g_main - g_rival) / g_main if g_main > 0 else 0.0
-    conf = float(np.clip(0.5 + 0.5 * sep, 0.0, 1.0))
+    score = float(np.clip(0.5 + 0.5 * sep, 0.0, 1.0))
+    conf = calibrated(score)
     if any(h.stage != "full" and _gain(nominal, h) > 0 for h in rivals):
         conf = min(conf, SCREENED_CAP)  # a rival that explains something was only screened
     return {"effect": main.augmentation.effect, "effects": [a.augmentation.effect for a in accepted],
             "explanation": report.explanation(nominal, accepted, findings, rivals[0] if rivals else None, outs) + tail,
-            "confidence": round(conf * scale, 3), "failed": lost}
+            "confidence": round(conf * scale, 3), "score": round(score, 4), "failed": lost}
