@@ -6,8 +6,8 @@ and records for each the verdict, whether it names the truth (``none`` for the c
 score the confidence is built from (``Diagnosis.verdict["score"]``: ``0.5 + 0.5 (g1 - g2) / g1``
 for an effect, ``1 - g / (2 MIN_VALIDATION_GAIN)`` for ``none``, before the calibration, the failure
 factor and the cap).  Then it fits the share of right verdicts as a non-decreasing function of the raw
-score (blocks of at least ten verdicts, pooled adjacent violators, each level Laplace-smoothed) and prints the reliability table and the knots
-that ``phs.workflows.diagnose.ranking.CALIBRATION`` holds.
+score (blocks of at least ten verdicts, pooled adjacent violators, each level Laplace-smoothed) and
+prints the reliability table and the knots that ``phs.workflows.diagnose.ranking.CALIBRATION`` holds.
 
     python bench/calibrate_confidence.py --out cal-0.jsonl --shard 0/2 &   # one process per core
     python bench/calibrate_confidence.py --out cal-1.jsonl --shard 1/2
@@ -122,7 +122,8 @@ def fit(paths) -> dict:
         for a, b in zip([0.0, 0.55, 0.65, 0.8, 0.9], [0.55, 0.65, 0.8, 0.9, 1.0001], strict=True):
             m = (s >= a) & (s < b)
             if m.any():
-                print(f"| {kind} | {a:.2f}–{min(b, 1.0):.2f} | {int(m.sum())} | {int(y[m].sum())} | {y[m].mean():.2f} | {c[m].mean():.2f} |")
+                print(f"| {kind} | {a:.2f}–{min(b, 1.0):.2f} | {int(m.sum())} | {int(y[m].sum())} | "
+                      f"{y[m].mean():.2f} | {c[m].mean():.2f} |")
         sq_raw += list((s - y) ** 2)
         sq_cal += list((np.array([calibrated(v, kind) for v in s]) - y) ** 2)
     out["brier_raw"] = round(float(np.mean(sq_raw)), 4)

@@ -3,8 +3,9 @@
 ``bench/calibration_data.jsonl`` holds 80 diagnoses (``bench/calibrate_confidence.py``); the knots in
 ``phs.workflows.diagnose.ranking.CALIBRATION`` must be what the bench's fit gives on them, and the
 calibrated confidence must be reliable on them: in each kind of verdict its mean within 0.05 of the
-share right (the levels are block shares smoothed by Laplace's rule, which moves a block of ten by at
-most 1/12 ≈ 0.04 towards one half), and its Brier score below the raw score's.  The self-test shows the reliability check failing for the raw score.
+share right (each level is smoothed by Laplace's rule, which moves a level of ten verdicts by at most
+1/12 ≈ 0.04 towards one half), and its Brier score below the raw score's.  The self-test shows the
+reliability check failing for the raw score.
 """
 
 from __future__ import annotations
@@ -65,4 +66,6 @@ def test_calibration_is_monotone_and_bounded():
     grid = np.linspace(0, 1, 101)
     for kind in ("effect", "none"):
         c = np.array([calibrated(v, kind) for v in grid])
-        assert np.all(np.diff(c) >= 0) and np.all((c > 0) & (c < 1))
+        assert np.all(np.diff(c) >= 0) and np.all((c >= 0) & (c < 1))
+        # below every calibrated verdict the raw score, never more
+        assert np.all(c[grid < CALIBRATION[kind][0][0]] <= grid[grid < CALIBRATION[kind][0][0]])
