@@ -8,7 +8,7 @@ import math
 from phs.errors import InputDataError
 from phs.workflows.cli_options import _name_list
 from phs.workflows.cli_vocabulary import add_option
-from phs.workflows.inputs import parse_assignments
+from phs.workflows.inputs import _names_and_units, parse_assignments
 from phs.workflows.loader import load_model
 
 
@@ -62,15 +62,16 @@ def parse_scales(items) -> dict:
 
 
 def _csv_header(path: str) -> list[str] | None:
-    """Column names of a CSV file, or None when it cannot be read (the recording reader then says why)."""
+    """Column names of a CSV file (without a trailing `` [unit]``, as ``phs simulate --out`` writes them),
+    or None when it cannot be read (the recording reader then says why)."""
     import csv
 
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             for cells in csv.reader(fh):
                 if cells and any(c.strip() for c in cells):
-                    return [c.strip() for c in cells]
-    except (OSError, UnicodeDecodeError, csv.Error):
+                    return _names_and_units([c.strip() for c in cells], path)[0]
+    except (OSError, UnicodeDecodeError, csv.Error, InputDataError):
         return None
     return None
 
