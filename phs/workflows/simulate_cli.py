@@ -87,39 +87,9 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def _figure_png(res) -> bytes:
-    """PNG of the states (scaled), measured outputs and energy accounts, rendered without pyplot."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    s = res.system
-    measured_units = list(dict.fromkeys(mo.unit for mo in s.measured))   # one panel per unit
-    panels = ["states"] + measured_units + ["energy"]
-    fig = Figure(figsize=(8, 2.6 * len(panels)), constrained_layout=True)
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, panel in zip(axes, panels, strict=True):
-        if panel == "states":
-            for st in s.states:
-                ax.plot(res.t, res[st.name] / st.typical, label=f"{st.name} / {st.typical:g} {st.unit}")
-            ax.set_ylabel("state / scale [1]")
-        elif panel != "energy":
-            for mo in s.measured:
-                if mo.unit == panel:
-                    ax.plot(res.t, res[mo.name], label=mo.name)
-            ax.set_ylabel(f"measured [{panel}]")
-        else:
-            E_supplied, E_dissipated = res.energy_accounts()
-            ax.plot(res.t, res.H - res.H[0], label="H - H(0)")
-            ax.plot(res.t, E_supplied, label="E_supplied (∫ supplied power dt)")
-            ax.plot(res.t, E_dissipated, label="E_dissipated (∫ dissipated power dt)")
-            ax.plot(res.t, res.H - res.H[0] - E_supplied + E_dissipated, "k:", label="balance residual")
-            ax.set_ylabel("energy [J]")
-        ax.legend(loc="best", fontsize="small")
-        ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel("t [s]")
-    fig.suptitle(f"{s.name}: simulation")
+    """PNG of :meth:`SimulationResult.plot <codegen.results.SimulationResult.plot>`, rendered in memory."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    res.plot().savefig(buf, format="png", dpi=110)
     return buf.getvalue()
 
 
