@@ -135,12 +135,17 @@ def add_deprecated_alias(p: argparse.ArgumentParser, old: str, new: str) -> None
                    append=isinstance(target, argparse._AppendAction), default=argparse.SUPPRESS, help=argparse.SUPPRESS)
 
 
-def _add_model_options(p: argparse.ArgumentParser, csv: bool = True) -> None:
-    """The positional MODEL, ``--param`` and ``--json``; with ``csv`` (a subcommand that reads CSV
-    files) also ``--time`` and ``--map``."""
+def _add_model_argument(p: argparse.ArgumentParser) -> None:
+    """The positional MODEL and ``--param``."""
     p.add_argument("model", metavar="MODEL",
                    help="module:function or path/file.py:function returning a PHSystem, or a saved model FILE.json")
     add_option(p, "--param")
+
+
+def _add_model_options(p: argparse.ArgumentParser, csv: bool = True) -> None:
+    """The positional MODEL, ``--param`` and ``--json``; with ``csv`` (a subcommand that reads CSV
+    files) also ``--time`` and ``--map``."""
+    _add_model_argument(p)
     if csv:
         add_option(p, "--time")
         add_option(p, "--map")
