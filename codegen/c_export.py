@@ -28,6 +28,17 @@ def write_c_sources(functions, directory, base: str, head: str) -> list[str]:
     ------
     InputDataError
         When the directory's parent does not exist, or the directory is a file.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import casadi as ca
+    >>> x = ca.SX.sym("x")
+    >>> twice = ca.Function("twice", [x], [2 * x], ["x"], ["y"])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     paths = write_c_sources([twice], d, "demo", c_comment(["y = 2 x"]))
+    ...     [os.path.basename(p) for p in paths], open(paths[1]).read().splitlines()[:3]
+    (['demo.c', 'demo.h'], ['/*', ' * y = 2 x', ' */'])
     """
     directory = os.fspath(directory)
     if os.path.exists(directory) and not os.path.isdir(directory):
@@ -52,7 +63,17 @@ def write_c_sources(functions, directory, base: str, head: str) -> list[str]:
 
 
 def c_comment(lines) -> str:
-    """A C block comment of ``lines``."""
+    """A C block comment of ``lines``.
+
+    Examples
+    --------
+    >>> print(c_comment(["first", "", "third"]), end="")
+    /*
+     * first
+     *
+     * third
+     */
+    """
     body = "\n".join(" * " + ln if ln else " *" for ln in lines)
     return "/*\n" + body + "\n */\n"
 

@@ -203,6 +203,15 @@ class SimulationResult:
         """Every signal as a pandas DataFrame indexed by time ``t``; units in ``df.attrs["units"]``.
 
         Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from systems.examples import rc_circuit
+        >>> df = simulate(rc_circuit(), np.linspace(0, 1e-3, 5), u={"U": 1.0}).to_pandas()  # doctest: +SKIP
+        >>> df["v_C"].iloc[-1], df.attrs["units"]["v_C"]  # doctest: +SKIP
+        (0.6321..., 'V')
         """
         from codegen.tables import require_pandas
 
@@ -219,6 +228,15 @@ class SimulationResult:
 
         Returns the matplotlib figure (drawn on ``fig`` when given), saved to ``path`` when given
         (atomically, in the format of its suffix).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from systems.examples import mass_spring_damper
+        >>> fig = simulate(mass_spring_damper(), np.linspace(0, 1, 11), u={"F": 1.0}).plot()
+        >>> [ax.get_ylabel() for ax in fig.axes]
+        ['state / scale [1]', 'measured [m]', 'energy [J]']
         """
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure

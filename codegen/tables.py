@@ -44,7 +44,13 @@ def _cell(v) -> str:
 
 
 def html_table(header: Sequence[str], rows: Sequence[Sequence], caption: str | None = None) -> str:
-    """A small HTML table; every header, cell and the caption are escaped (floats shown with 6 digits)."""
+    """A small HTML table; every header, cell and the caption are escaped (floats shown with 6 digits).
+
+    Examples
+    --------
+    >>> html_table(["x"], [[1 / 3]])
+    '<table><thead><tr><th>x</th></tr></thead><tbody><tr><td>0.333333</td></tr></tbody></table>'
+    """
     head = "".join(f"<th>{_cell(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in row) + "</tr>" for row in rows)
     cap = f"<caption>{_cell(caption)}</caption>" if caption else ""

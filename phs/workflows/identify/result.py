@@ -78,6 +78,16 @@ class IdentificationResult:
         indexed by parameter name; the parameters' units in ``df.attrs["units"]``.
 
         Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> from phs.workflows.bundled import recording_path
+        >>> from phs.workflows.identify import identify
+        >>> from phs.workflows.recording import Recording
+        >>> from systems.examples import mass_spring_damper
+        >>> fit = identify(mass_spring_damper(), Recording.from_csv(recording_path("msd_two_tone")), ["k.K"])
+        >>> fit.to_pandas().loc["k.K", "fitted"]  # doctest: +SKIP
+        4.99...
         """
         from codegen.tables import require_pandas
 
