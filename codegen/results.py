@@ -199,6 +199,82 @@ class SimulationResult:
         header, data = self.table()
         write_csv_atomic(path, [f"{name} [{self.unit(name)}]" for name in header], data)
 
+    def to_pandas(self):
+        """Every signal as a pandas DataFrame indexed by time ``t``; units in ``df.attrs["units"]``.
+
+        Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from systems.examples import rc_circuit
+        >>> df = simulate(rc_circuit(), np.linspace(0, 1e-3, 5), u={"U": 1.0}).to_pandas()  # doctest: +SKIP
+        >>> df["v_C"].iloc[-1], df.attrs["units"]["v_C"]  # doctest: +SKIP
+        (0.6321..., 'V')
+        """
+        from codegen.tables import require_pandas
+
+        pd = require_pandas("SimulationResult.to_pandas()")
+        header, data = self.table()
+        df = pd.DataFrame({name: data[:, k] for k, name in enumerate(header) if name != "t"},
+                          index=pd.Index(self.t, name="t"))
+        df.attrs["units"] = {name: self.unit(name) for name in header}
+        return df
+
+    def plot(self, path=None, fig=None):
+        """States (each divided by its typical size), measured outputs (a panel per unit) and the
+        energy accounts (H - H(0), supplied and dissipated energy, and the balance residual).
+
+        Returns the matplotlib figure (drawn on ``fig`` when given), saved to ``path`` when given
+        (atomically, in the format of its suffix).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from systems.examples import mass_spring_damper
+        >>> fig = simulate(mass_spring_damper(), np.linspace(0, 1, 11), u={"F": 1.0}).plot()
+        >>> [ax.get_ylabel() for ax in fig.axes]
+        ['state / scale [1]', 'measured [m]', 'energy [J]']
+        """
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        s = self.system
+        measured_units = list(dict.fromkeys(mo.unit for mo in s.measured))   # one panel per unit
+        panels = ["states"] + measured_units + ["energy"]
+        if fig is None:
+            fig = Figure(figsize=(8, 2.6 * len(panels)), constrained_layout=True)
+            FigureCanvasAgg(fig)
+        axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+        for ax, panel in zip(axes, panels, strict=True):
+            if panel == "states":
+                for st in s.states:
+                    ax.plot(self.t, self[st.name] / st.typical, label=f"{st.name} / {st.typical:g} {st.unit}")
+                ax.set_ylabel("state / scale [1]")
+            elif panel != "energy":
+                for mo in s.measured:
+                    if mo.unit == panel:
+                        ax.plot(self.t, self[mo.name], label=mo.name)
+                ax.set_ylabel(f"measured [{panel}]")
+            else:
+                E_supplied, E_dissipated = self.energy_accounts()
+                ax.plot(self.t, self.H - self.H[0], label="H - H(0)")
+                ax.plot(self.t, E_supplied, label="E_supplied (∫ supplied power dt)")
+                ax.plot(self.t, E_dissipated, label="E_dissipated (∫ dissipated power dt)")
+                ax.plot(self.t, self.H - self.H[0] - E_supplied + E_dissipated, "k:", label="balance residual")
+                ax.set_ylabel("energy [J]")
+            ax.legend(loc="best", fontsize="small")
+            ax.grid(True, alpha=0.3)
+        axes[-1].set_xlabel("t [s]")
+        fig.suptitle(f"{s.name}: simulation")
+        if path is not None:
+            from codegen.figures import save_figure
+
+            save_figure(fig, path, dpi=110)
+        return fig
+
     def __repr__(self) -> str:
         return f"SimulationResult({self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g})"
 

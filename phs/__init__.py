@@ -2,7 +2,7 @@
 
 The core (this package without :mod:`phs.workflows`) depends on sympy, numpy
 and scipy only.  Workflows that run models (simulation, identification,
-diagnosis, sweeps) are exposed lazily so ``import phs`` never imports casadi.
+diagnosis, sweeps, linearisation) are exposed lazily so ``import phs`` never imports casadi.
 """
 
 from phs import signals
@@ -31,6 +31,7 @@ __all__ = [
     "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
     "bond", "feedback_link", "feedback", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
     "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "identify", "diagnose", "sweep", "Recording", "load",
+    "linearize",
 ]
 
 
@@ -49,7 +50,7 @@ def load(path):
     return PHSystem.load(path)
 
 
-_LAZY = ("simulate", "identify", "diagnose", "sweep", "Recording")
+_LAZY = ("simulate", "identify", "diagnose", "sweep", "Recording", "linearize")
 
 
 def __dir__():
@@ -58,7 +59,7 @@ def __dir__():
     Examples
     --------
     >>> import phs
-    >>> {"simulate", "identify", "diagnose", "sweep", "Recording"} <= set(dir(phs))
+    >>> {"simulate", "identify", "diagnose", "sweep", "Recording", "linearize"} <= set(dir(phs))
     True
     """
     return sorted(set(globals()) | set(_LAZY))
@@ -70,6 +71,10 @@ def __getattr__(name):
         from codegen.simulator import simulate
 
         return simulate
+    if name == "linearize":
+        from codegen.linearize import linearize
+
+        return linearize
     if name == "identify":
         from phs.workflows.identify import identify
 

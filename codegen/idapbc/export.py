@@ -2,13 +2,7 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
-
-import casadi as ca
-
-from phs.errors import InputDataError
-from phs.io import write_atomic
+from codegen.c_export import c_comment, write_c_sources
 
 
 def export_c(ctrl, directory, name: str | None = None) -> list[str]:
@@ -48,30 +42,9 @@ def export_c(ctrl, directory, name: str | None = None) -> list[str]:
     ...     [os.path.basename(p) for p in export_c(ctrl, d)]
     ['msd_controller.c', 'msd_controller.h']
     """
-    directory = os.fspath(directory)
-    if not os.path.isdir(directory):
-        parent = os.path.dirname(os.path.abspath(directory))
-        if not os.path.isdir(parent):
-            raise InputDataError(f"cannot export into {directory!r}: directory {parent!r} does not exist")
-        os.makedirs(directory, exist_ok=True)
     base = name or f"{ctrl.name}_controller"
     fx = ctrl._fx
-    with tempfile.TemporaryDirectory() as tmp:
-        cg = ca.CodeGenerator(f"{base}.c", {"with_header": True, "casadi_real": "double", "casadi_int": "long long int"})
-        cg.add(fx["law"])
-        cg.add(fx["yd_xi"])
-        cg.add(fx["Hd_export"])
-        cg.generate(tmp + os.sep)
-        paths = []
-        head = _c_comment(ctrl)
-        for ext in (".c", ".h"):
-            with open(os.path.join(tmp, base + ext), encoding="utf-8") as fh:
-                text = head + fh.read()
-            path = os.path.join(directory, base + ext)
-            paths.append((path, text))
-    for path, text in paths:
-        write_atomic(path, text)
-    return [p for p, _ in paths]
+    return write_c_sources([fx["law"], fx["yd_xi"], fx["Hd_export"]], directory, base, _c_comment(ctrl))
 
 
 def _c_comment(ctrl) -> str:
@@ -90,5 +63,4 @@ def _c_comment(ctrl) -> str:
     lines.append(f"{ctrl.name}_passive_output(x) -> y_d = g(x)^T dH_d/dx;  {ctrl.name}_hd(x) -> explicit part of H_d")
     lines.append("Controller parameters are compiled in: " + ", ".join(
         f"{k}={v:.17g}" for k, v in zip(s.param_names, ctrl.num.p)))
-    body = "\n".join(" * " + ln if ln else " *" for ln in lines)
-    return "/*\n" + body + "\n */\n"
+    return c_comment(lines)

@@ -1,7 +1,7 @@
 """The ``phs`` command line: the parser and the dispatch to the subcommands.
 
 Each subcommand is defined in its workflow's own module (``phs.workflows.simulate_cli``,
-``fit_cli``, ``passivity_cli``, ``control_cli``, ``diagnose.cli``, ``sweep.cli``): one
+``fit_cli``, ``passivity_cli``, ``control_cli``, ``diagnose.cli``, ``sweep.cli``, ``export_cli``, ``list_cli``): one
 ``add_subcommand`` function declaring its options and one ``run_<name>`` function doing the work.
 Errors the project raises on purpose (:class:`~phs.errors.PHSError`) are printed as one line
 ``phs: error: <message>`` with exit code 2, and no output file is written.
@@ -34,6 +34,8 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
     "phs.workflows.control_cli",
     "phs.workflows.diagnose.cli",
     "phs.workflows.sweep.cli",
+    "phs.workflows.export_cli",
+    "phs.workflows.list_cli",
 )
 
 

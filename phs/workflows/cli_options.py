@@ -11,15 +11,6 @@ import numpy as np
 from phs.errors import InputDataError
 
 
-def _add_model_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL", help="module:function or path/file.py:function returning a PHSystem")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="override a parameter")
-    p.add_argument("--time", default="t", metavar="COLUMN", help="time column of CSV files (default: t)")
-    p.add_argument("--map", action="append", default=[], metavar="COLUMN=SIGNAL",
-                   help="read model signal SIGNAL from CSV column COLUMN (default: same names)")
-    p.add_argument("--json", metavar="FILE", help="write a JSON summary")
-
-
 def _positive(option: str, integer: bool = False):
     """argparse type: a positive finite number (an integer >= 1 when ``integer``), errors naming the option."""
     what = "a positive integer" if integer else "a positive finite number"
@@ -34,6 +25,34 @@ def _positive(option: str, integer: bool = False):
         return v
 
     return convert
+
+
+def _nonnegative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a nonnegative integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a nonnegative integer, got {text!r}")
+    return v
+
+
+def _time_grid(t_end: float, dt: float | None) -> np.ndarray:
+    """The output grid 0, DT, ..., T of ``--t-end T --dt DT`` (DT defaults to T/1000), checked.
+
+    Examples
+    --------
+    >>> _time_grid(1.0, None)[:3], len(_time_grid(1.0, 0.25))
+    (array([0.   , 0.001, 0.002]), 5)
+    """
+    if dt is None:
+        dt = t_end / 1000
+    if dt > t_end:
+        raise InputDataError(f"--dt {dt:g} is larger than --t-end {t_end:g}")
+    if t_end / dt > 1e7:
+        raise InputDataError(f"--t-end / --dt gives {t_end / dt:.3g} samples; at most 1e7 are allowed")
+    return np.arange(0.0, t_end + dt / 2, dt)
 
 
 def _check_writable(*paths: str | None) -> None:

@@ -6,21 +6,16 @@ import argparse
 import math
 
 from phs.errors import InputDataError
-from phs.workflows.cli_options import _name_list, _positive
-from phs.workflows.inputs import parse_assignments
+from phs.workflows.cli_options import _name_list
+from phs.workflows.cli_vocabulary import add_option
+from phs.workflows.inputs import _names_and_units, parse_assignments
 from phs.workflows.loader import load_model
 
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
     """Options of the subcommands that fit a model to a recording (``fit``, ``diagnose``)."""
-    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
-    p.add_argument("--scale", action="append", default=[], metavar="COLUMN=FROM:TO",
-                   help="convert a column's unit (pos=mm:m, volt=kV:V) or multiply it by a factor (COLUMN=FACTOR)")
-    p.add_argument("--resample", type=_positive("--resample"), metavar="DT",
-                   help="resample the recordings onto a uniform grid of step DT [s] (linear interpolation)")
-    p.add_argument("--outputs", metavar="NAME,NAME",
-                   help="measured outputs to fit (default: every one the recording provides)")
-    p.add_argument("--validate", metavar="DATA2", help="second CSV recording scored with the fitted model")
+    for name in ("--x0", "--scale", "--resample", "--outputs", "--validate"):
+        add_option(p, name)
 
 
 def parse_scales(items) -> dict:
@@ -67,15 +62,16 @@ def parse_scales(items) -> dict:
 
 
 def _csv_header(path: str) -> list[str] | None:
-    """Column names of a CSV file, or None when it cannot be read (the recording reader then says why)."""
+    """Column names of a CSV file (without a trailing `` [unit]``, as ``phs simulate --out`` writes them),
+    or None when it cannot be read (the recording reader then says why)."""
     import csv
 
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             for cells in csv.reader(fh):
                 if cells and any(c.strip() for c in cells):
-                    return [c.strip() for c in cells]
-    except (OSError, UnicodeDecodeError, csv.Error):
+                    return _names_and_units([c.strip() for c in cells], path)[0]
+    except (OSError, UnicodeDecodeError, csv.Error, InputDataError):
         return None
     return None
 

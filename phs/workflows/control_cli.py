@@ -1,6 +1,6 @@
 """``phs control``: design an IDA-PBC controller from a terminal.
 
-    phs control MODEL --target NAME=VALUE [...] [--input NAME ...] [--fixed NAME=VALUE ...] [--x0 NAME=VALUE ...]
+    phs control MODEL --target NAME=VALUE [...] [--controlled NAME ...] [--fixed NAME=VALUE ...] [--x0 NAME=VALUE ...]
                 [--neglect STATE,STATE] [--damping R | --damping STATE=D] [--stiffness STATE=K ...]
                 [--integral {passive,output}] [--integral-time T] [--t-end T] [--dt DT] [--plant-param NAME=VALUE ...]
                 [--rays N] [--simulations N] [--export-c DIR] [--param NAME=VALUE ...] [--json FILE] [--report DIR]
@@ -39,7 +39,8 @@ import numpy as np
 
 from phs.errors import InputDataError
 from phs.io import write_atomic
-from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _name_list, _positive
+from phs.workflows.cli_options import _check_writable, _finite_or_none, _name_list, _positive, _time_grid
+from phs.workflows.cli_vocabulary import _add_model_options, add_deprecated_alias, add_option
 from phs.workflows.inputs import parse_assignments
 from phs.workflows.loader import load_model
 
@@ -63,14 +64,14 @@ def add_subcommand(sub) -> None:
                     "target within 1 % of its value at the end of the simulated time; 1: a certificate failed or a "
                     "target was not reached in the simulated time (the summary says which); 2: error (an unreachable "
                     "target included).")
-    _add_model_options(p)
+    _add_model_options(p, csv=False)
     p.add_argument("--target", action="append", default=[], required=True, metavar="NAME=VALUE",
                    help="value to hold a state or measured output at (one per controlled input)")
-    p.add_argument("--input", action="append", default=[], metavar="NAME",
+    p.add_argument("--controlled", action="append", default=[], metavar="NAME",
                    help="controlled input (default: all inputs, when as many as targets)")
+    add_deprecated_alias(p, "--input", "--controlled")
     p.add_argument("--fixed", action="append", default=[], metavar="NAME=VALUE", help="value of an input not controlled")
-    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE",
-                   help="state on the leaf to regulate on, and start of the simulation (e.g. seg1.l_p=0.015)")
+    add_option(p, "--x0", detail="also picks the leaf to regulate on (e.g. seg1.l_p=0.015)")
     p.add_argument("--neglect", metavar="STATE,STATE", help="storages left out of the design (globs such as seg*.Q1)")
     p.add_argument("--damping", metavar="R|STATE=D", default="0",
                    help="damping injection: R in R_a = R g g^T, or STATE=D for the dissipation D added on that row at x*")
@@ -82,8 +83,8 @@ def add_subcommand(sub) -> None:
                                                                     "target error")
     p.add_argument("--integral-time", type=_positive("--integral-time"), metavar="T",
                    help="time constant of the integral action [s]")
-    p.add_argument("--t-end", type=_positive("--t-end"), metavar="T", help="simulate the closed loop for T seconds")
-    p.add_argument("--dt", type=_positive("--dt"), metavar="DT", help="output step of the simulation (default T/1000)")
+    add_option(p, "--t-end", detail="simulates the closed loop")
+    add_option(p, "--dt")
     p.add_argument("--plant-param", action="append", default=[], metavar="NAME=VALUE",
                    help="parameter of the simulated plant only (plant/controller mismatch)")
     p.add_argument("--rays", type=_positive("--rays", integer=True), default=32, metavar="N",
@@ -91,7 +92,7 @@ def add_subcommand(sub) -> None:
     p.add_argument("--simulations", type=_positive("--simulations", integer=True), default=6, metavar="N",
                    help="closed-loop runs from random states in that region (default 6)")
     p.add_argument("--export-c", metavar="DIR", help="write the control law as C source and header into DIR")
-    p.add_argument("--report", metavar="DIR", help="write DIR/controller.txt, certificates.json, closed_loop.png/.csv")
+    add_option(p, "--report", detail="controller.txt, certificates.json, closed_loop.png/.csv")
     p.set_defaults(run=run_control)
 
 
@@ -140,15 +141,14 @@ def run_control(args: argparse.Namespace) -> int:
     damping = _damping(args.damping)
     if args.dt is not None and args.t_end is None:
         raise InputDataError("--dt needs --t-end")
-    if args.t_end is not None and args.dt is not None and args.dt > args.t_end:
-        raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
+    t = None if args.t_end is None else _time_grid(args.t_end, args.dt)
     system = load_model(args.model, params)
     if plant_params:
         system.param_vector(plant_params)  # ParameterError naming an unknown parameter before any work
 
     from codegen.idapbc import design  # imported here: casadi is only needed once a model runs
 
-    ctrl = design(system, target, inputs=args.input or None, fixed_inputs=fixed, x0=x0 or None, neglect=neglect,
+    ctrl = design(system, target, inputs=args.controlled or None, fixed_inputs=fixed, x0=x0 or None, neglect=neglect,
                   structure=args.structure, damping=damping, stiffness=stiffness, integral=args.integral,
                   integral_time=args.integral_time)
     report = ctrl.certify(rays=args.rays, simulations=args.simulations)
@@ -156,8 +156,6 @@ def run_control(args: argparse.Namespace) -> int:
     res = None
     unreached: list[str] = []
     if args.t_end is not None:
-        dt = args.dt or args.t_end / 1000
-        t = np.arange(0.0, args.t_end + dt / 2, dt)
         x0_plant = {k: v for k, v in x0.items()}
         res = ctrl.simulate(t, plant=system, params=plant_params, x0=_plant_x0(ctrl, system, x0_plant))
         lines = [f"closed loop on {system.name!r}" + (f" with {', '.join(f'{k}={v:g}' for k, v in plant_params.items())}"

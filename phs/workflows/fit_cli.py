@@ -10,8 +10,9 @@ import os
 
 from phs.errors import InputDataError
 from phs.io import write_atomic
-from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _positive
+from phs.workflows.cli_options import _check_writable, _finite_or_none, _positive
 from phs.workflows.cli_recordings import add_recording_options, model_and_recordings
+from phs.workflows.cli_vocabulary import _add_model_options, add_option
 
 
 def add_subcommand(sub) -> None:
@@ -31,12 +32,12 @@ def add_subcommand(sub) -> None:
                     "summary (--json) and a report directory (--report: fit.png, sensitivity.md, summary.txt).")
     _add_model_options(p)
     p.add_argument("data", metavar="DATA", help="CSV recording: a time column, the model's inputs and measured outputs")
-    p.add_argument("--free", required=True, metavar="NAME,NAME", help="parameters to fit (comma-separated)")
+    add_option(p, "--free", required=True)
     add_recording_options(p)
-    p.add_argument("--report", metavar="DIR", help="write DIR/fit.png, DIR/sensitivity.md and DIR/summary.txt")
+    add_option(p, "--report", detail="fit.png, sensitivity.md and summary.txt")
     p.add_argument("--max-iter", type=_positive("--max-iter", integer=True), default=100, metavar="N",
                    help="maximum number of residual evaluations (default 100)")
-    p.add_argument("--quiet", action="store_true", help="do not print the optimiser's progress on stderr")
+    add_option(p, "--quiet", detail="the optimiser's progress is not printed")
     p.set_defaults(run=run_fit)
 
 

@@ -1,11 +1,13 @@
-"""Load a model named on the command line: ``module:function`` or ``path/file.py:function``.
+"""Load a model named on the command line: ``module:function``, ``path/file.py:function``, or a
+model saved as JSON (``FILE.json``, written by :meth:`PHSystem.save`).
 
 The function is called without arguments and must return a
 :class:`~phs.system.PHSystem`; ``--param NAME=VALUE`` overrides are then
 applied with :meth:`PHSystem.with_params`.  Every failure (bad spec, missing
 module, file or function, an exception inside the function, a wrong return
 type) becomes one :class:`~phs.errors.InputDataError` naming the culprit; no
-traceback is printed.
+traceback is printed.  A JSON model is read by the safe reader of :mod:`phs.io` only: its
+expressions are data, never run.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import os
 import sys
 from types import ModuleType
 
-from phs.errors import InputDataError
+from phs.errors import InputDataError, PHSError
 from phs.system import PHSystem
 
 
@@ -62,6 +64,17 @@ def _import_module(modname: str, spec: str) -> ModuleType:
             sys.path.remove(os.getcwd())
 
 
+def _load_json(spec: str) -> PHSystem:
+    """A model saved with :meth:`PHSystem.save`, read as data (never run); errors name the file."""
+    if not os.path.isfile(spec):
+        where = "does not exist" if not os.path.exists(spec) else "is not a file"
+        raise InputDataError(f"MODEL {spec!r}: file {where}")
+    try:
+        return PHSystem.load(spec)
+    except (PHSError, OSError, ValueError) as exc:
+        raise InputDataError(f"MODEL {spec!r}: not a readable saved model: {_describe(exc)}") from None
+
+
 def load_model(spec: str, params: dict | None = None) -> PHSystem:
     """Build the system named by ``spec`` and apply parameter overrides.
 
@@ -71,6 +84,7 @@ def load_model(spec: str, params: dict | None = None) -> PHSystem:
         ``module:function`` (``systems.examples:rc_circuit``) or
         ``path/to/file.py:function``; the function is called without
         arguments.  Dotted attributes (``module:Class.factory``) are allowed.
+        Or a path ending in ``.json``: a model saved with :meth:`PHSystem.save`.
     params : dict of str -> float, optional
         Parameter overrides by name.
 
@@ -83,7 +97,7 @@ def load_model(spec: str, params: dict | None = None) -> PHSystem:
     InputDataError
         When the spec has no colon, the module or file cannot be found or
         imported, the function is missing, raises, or does not return a
-        PHSystem.
+        PHSystem; when a ``.json`` model cannot be read.
     ParameterError
         When an override names an unknown parameter or is not a finite number.
 
@@ -94,13 +108,21 @@ def load_model(spec: str, params: dict | None = None) -> PHSystem:
     >>> load_model("systems.examples")
     Traceback (most recent call last):
     ...
-    phs.errors.InputDataError: MODEL 'systems.examples' must be 'module:function' or 'path/file.py:function'
+    phs.errors.InputDataError: MODEL 'systems.examples' must be 'module:function', 'path/file.py:function' or FILE.json
+    >>> import os, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     load_model("systems.examples:rc_circuit", {"R.R": 2e3}).save(os.path.join(d, "rc.json"))
+    ...     load_model(os.path.join(d, "rc.json")).param("R.R").value
+    2000.0
     """
+    if isinstance(spec, str) and spec.lower().endswith(".json"):
+        system = _load_json(spec)
+        return system.with_params(params) if params else system
     if not isinstance(spec, str) or ":" not in spec:
-        raise InputDataError(f"MODEL {spec!r} must be 'module:function' or 'path/file.py:function'")
+        raise InputDataError(f"MODEL {spec!r} must be 'module:function', 'path/file.py:function' or FILE.json")
     where, _, attr = spec.rpartition(":")
     if not where or not attr:
-        raise InputDataError(f"MODEL {spec!r} must be 'module:function' or 'path/file.py:function'")
+        raise InputDataError(f"MODEL {spec!r} must be 'module:function', 'path/file.py:function' or FILE.json")
     is_file = where.endswith(".py") or "/" in where or os.sep in where
     module = _import_file(where, spec) if is_file else _import_module(where, spec)
     what = f"file {where!r}" if is_file else f"module {where!r}"

@@ -1,7 +1,7 @@
 """``phs passivity``: the passivity certificate of a model from a terminal.
 
     phs passivity MODEL [--box NAME=LO:HI ...] [--equilibrium NAME=VALUE ...] [--x0 NAME=VALUE ...]
-                  [--input EXPR_OR_CSV ...] [--t-end T --dt DT] [--samples N] [--starts N] [--seed N]
+                  [--input EXPR_OR_CSV ...] [--t-end T [--dt DT]] [--box-samples N] [--starts N] [--seed N]
                   [--param NAME=VALUE ...] [--time COLUMN] [--map COLUMN=SIGNAL ...] [--json FILE] [--report DIR]
 
 prints the certificate (:func:`codegen.passivity.certify`) and exits with 0 when the model is certified
@@ -10,7 +10,7 @@ passive, 1 when it is not, and 2 on an error naming the bad option (nothing is w
 Examples
 --------
 >>> from phs.workflows.cli import main
->>> main(["passivity", "systems.examples:rc_circuit", "--param", "R.R=-1000", "--samples", "32", "--starts", "1"])  # doctest: +ELLIPSIS
+>>> main(["passivity", "systems.examples:rc_circuit", "--param", "R.R=-1000", "--box-samples", "32", "--starts", "1"])  # doctest: +ELLIPSIS
 Passivity of 'rc' (model ...): NOT CERTIFIED PASSIVE; margin -2
 ...
 1
@@ -25,7 +25,8 @@ import os
 
 from phs.errors import InputDataError
 from phs.io import write_atomic
-from phs.workflows.cli_options import _add_model_options, _check_writable, _positive
+from phs.workflows.cli_options import _check_writable, _nonnegative_int, _positive, _time_grid
+from phs.workflows.cli_vocabulary import _add_model_options, add_deprecated_alias, add_option
 from phs.workflows.inputs import input_signals, parse_assignments, read_input_csv
 from phs.workflows.loader import load_model
 
@@ -37,7 +38,7 @@ def add_subcommand(sub) -> None:
     --------
     >>> from phs.workflows.cli import build_parser
     >>> args = build_parser().parse_args(["passivity", "systems.examples:rc_circuit", "--box", "C.Q=-1e-6:1e-6"])
-    >>> args.box, args.samples
+    >>> args.box, args.box_samples
     (['C.Q=-1e-6:1e-6'], 2000)
     """
     p = sub.add_parser(
@@ -54,30 +55,19 @@ def add_subcommand(sub) -> None:
     p.add_argument("--equilibrium", action="append", default=[], metavar="NAME=VALUE",
                    help="add the local test at an equilibrium: input values (the equilibrium is solved for) and/or "
                         "state values (checked to be an equilibrium)")
-    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE",
-                   help="start of the equilibrium solver and initial state of the simulation")
-    p.add_argument("--input", action="append", default=[], metavar="EXPR_OR_CSV",
-                   help="add the dissipation inequality along a simulation with this input: FILE.csv (a recording's "
-                        "inputs; its time grid unless --t-end), NAME=EXPR or EXPR")
-    p.add_argument("--t-end", type=_positive("--t-end"), metavar="T", help="final time of the simulation [s]")
-    p.add_argument("--dt", type=_positive("--dt"), metavar="DT", help="output step of the simulation [s]")
-    p.add_argument("--samples", type=_positive("--samples", integer=True), default=2000, metavar="N",
+    add_option(p, "--x0", detail="also the start of the equilibrium solver")
+    add_option(p, "--input", detail="adds the dissipation inequality along a simulation with these inputs (a "
+                                    "CSV file's time grid unless --t-end)")
+    add_option(p, "--t-end")
+    add_option(p, "--dt")
+    p.add_argument("--box-samples", type=_positive("--box-samples", integer=True), default=2000, metavar="N",
                    help="points of the dense sample of the box (default 2000)")
+    add_deprecated_alias(p, "--samples", "--box-samples")
     p.add_argument("--starts", type=_nonnegative_int, default=8, metavar="N",
                    help="starts of each nlpsol minimisation (default 8)")
-    p.add_argument("--seed", type=_nonnegative_int, default=0, metavar="N", help="seed of the sample (default 0)")
-    p.add_argument("--report", metavar="DIR", help="write DIR/report.html (with plots), report.json, report.txt, *.png")
+    add_option(p, "--seed", detail="of the sample of the box")
+    add_option(p, "--report", detail="report.html (with plots), report.json, report.txt, *.png")
     p.set_defaults(run=run_passivity)
-
-
-def _nonnegative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a nonnegative integer, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a nonnegative integer, got {text!r}")
-    return v
 
 
 def parse_box(items, system) -> dict:
@@ -145,8 +135,6 @@ def _equilibrium_spec(items, system):
 
 def _trajectory(args, system, x0: dict):
     """``{"t", "u", "x0"}`` for the trajectory test, or None without --input / --t-end."""
-    import numpy as np
-
     if not args.input and args.t_end is None:
         if args.dt is not None:
             raise InputDataError("--dt needs --t-end (or an --input CSV file giving the time grid)")
@@ -154,17 +142,11 @@ def _trajectory(args, system, x0: dict):
     mapping = parse_assignments(args.map, "--map")
     csvs = [s for s in args.input if str(s).strip().lower().endswith(".csv")]
     if args.t_end is not None:
-        if args.dt is None:
-            raise InputDataError("--t-end needs --dt (the output step of the simulation)")
-        if args.dt > args.t_end:
-            raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
-        if args.t_end / args.dt > 1e7:
-            raise InputDataError(f"--t-end / --dt gives {args.t_end / args.dt:.3g} samples; at most 1e7 are allowed")
-        t = np.arange(0.0, args.t_end + args.dt / 2, args.dt)
+        t = _time_grid(args.t_end, args.dt)
     elif csvs:
         t, _ = read_input_csv(csvs[0], system, args.time, mapping)
     else:
-        raise InputDataError("--input with an expression needs --t-end and --dt")
+        raise InputDataError("--input with an expression needs --t-end")
     u = input_signals(system, args.input, time_column=args.time, mapping=mapping, span=(t[0], t[-1]))
     return {"t": t, "u": u, "x0": x0 or None}
 
@@ -196,7 +178,7 @@ def run_passivity(args: argparse.Namespace) -> int:
 
     equilibrium = (states or True) if args.equilibrium else None
     report = certify(system, box=box, params=params or None, equilibrium=equilibrium, u=inputs or None, x0=x0 or None,
-                     trajectory=trajectory, samples=args.samples, starts=args.starts, seed=args.seed)
+                     trajectory=trajectory, samples=args.box_samples, starts=args.starts, seed=args.seed)
     text = report.text()
     document = None
     if args.json:

@@ -16,11 +16,10 @@ import io
 import json
 import time
 
-import numpy as np
-
 from phs.errors import InputDataError
 from phs.io import write_atomic
-from phs.workflows.cli_options import _add_model_options, _check_writable, _positive
+from phs.workflows.cli_options import _check_writable, _time_grid
+from phs.workflows.cli_vocabulary import _add_model_options, add_option
 from phs.workflows.inputs import input_signals, parse_assignments
 from phs.workflows.loader import load_model
 
@@ -37,19 +36,17 @@ def add_subcommand(sub) -> None:
     0.1
     """
     p = sub.add_parser("simulate", help="simulate a model and write its signals to CSV and/or a figure",
-                       description="Simulate MODEL on the grid 0, DT, ..., T and write every signal to --out "
+                       description="Simulate MODEL on the grid 0, DT, ..., T (DT defaults to T/1000) and write every signal to --out "
                                    "(CSV, headers 'name [unit]') and/or a figure to --plot; at least one of them.")
     _add_model_options(p)
-    p.add_argument("--t-end", required=True, type=_positive("--t-end"), metavar="T", help="final time [s]")
-    p.add_argument("--dt", required=True, type=_positive("--dt"), metavar="DT", help="output step [s]")
-    p.add_argument("--input", action="append", default=[], metavar="EXPR_OR_CSV",
-                   help="FILE.csv, NAME=EXPR, or EXPR for a single-input model (e.g. 'square(1.0, 50)'); "
-                        "inputs not given are 0")
-    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
-    p.add_argument("--rtol", type=_positive("--rtol"), default=1e-8, help="relative tolerance (default 1e-8)")
-    p.add_argument("--atol", type=_positive("--atol"), default=1e-8, help="absolute tolerance (default 1e-8)")
-    p.add_argument("--out", metavar="FILE", help="CSV file of every signal (headers 'name [unit]')")
-    p.add_argument("--plot", metavar="FILE", help="PNG figure of states, measured outputs and energy")
+    add_option(p, "--t-end", required=True)
+    add_option(p, "--dt")
+    add_option(p, "--input")
+    add_option(p, "--x0")
+    add_option(p, "--rtol")
+    add_option(p, "--atol")
+    add_option(p, "--out", detail="CSV of every signal (headers 'name [unit]')")
+    add_option(p, "--plot", detail="states, measured outputs and energy")
     p.set_defaults(run=run_simulate)
 
 
@@ -63,15 +60,11 @@ def run_simulate(args: argparse.Namespace) -> int:
     if args.out is None and args.plot is None:
         raise InputDataError("nothing to write: give --out FILE.csv (every signal), --plot FILE.png (a figure), or both")
     _check_writable(args.out, args.plot, args.json)
-    if args.dt > args.t_end:
-        raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
-    if args.t_end / args.dt > 1e7:
-        raise InputDataError(f"--t-end / --dt gives {args.t_end / args.dt:.3g} samples; at most 1e7 are allowed")
+    t = _time_grid(args.t_end, args.dt)
     params = parse_assignments(args.param, "--param", numeric=True)
     x0 = parse_assignments(args.x0, "--x0", numeric=True)
     mapping = parse_assignments(args.map, "--map")
     system = load_model(args.model, params)
-    t = np.arange(0.0, args.t_end + args.dt / 2, args.dt)
     u = input_signals(system, args.input, time_column=args.time, mapping=mapping, span=(t[0], t[-1]))
 
     from codegen import simulate  # imported here: casadi is only needed once a model runs
@@ -94,39 +87,9 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def _figure_png(res) -> bytes:
-    """PNG of the states (scaled), measured outputs and energy accounts, rendered without pyplot."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    s = res.system
-    measured_units = list(dict.fromkeys(mo.unit for mo in s.measured))   # one panel per unit
-    panels = ["states"] + measured_units + ["energy"]
-    fig = Figure(figsize=(8, 2.6 * len(panels)), constrained_layout=True)
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, panel in zip(axes, panels, strict=True):
-        if panel == "states":
-            for st in s.states:
-                ax.plot(res.t, res[st.name] / st.typical, label=f"{st.name} / {st.typical:g} {st.unit}")
-            ax.set_ylabel("state / scale [1]")
-        elif panel != "energy":
-            for mo in s.measured:
-                if mo.unit == panel:
-                    ax.plot(res.t, res[mo.name], label=mo.name)
-            ax.set_ylabel(f"measured [{panel}]")
-        else:
-            E_supplied, E_dissipated = res.energy_accounts()
-            ax.plot(res.t, res.H - res.H[0], label="H - H(0)")
-            ax.plot(res.t, E_supplied, label="E_supplied (∫ supplied power dt)")
-            ax.plot(res.t, E_dissipated, label="E_dissipated (∫ dissipated power dt)")
-            ax.plot(res.t, res.H - res.H[0] - E_supplied + E_dissipated, "k:", label="balance residual")
-            ax.set_ylabel("energy [J]")
-        ax.legend(loc="best", fontsize="small")
-        ax.grid(True, alpha=0.3)
-    axes[-1].set_xlabel("t [s]")
-    fig.suptitle(f"{s.name}: simulation")
+    """PNG of :meth:`SimulationResult.plot <codegen.results.SimulationResult.plot>`, rendered in memory."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    res.plot().savefig(buf, format="png", dpi=110)
     return buf.getvalue()
 
 

@@ -87,7 +87,7 @@ def test_recording_input_gives_the_time_grid(tmp_path, capsys):
     (["--equilibrium", "F=abc"], ["--equilibrium F", "'abc'"]),
     (["--param", "nope=1"], ["'nope'"]),
     (["--x0", "nope=1"], ["--x0", "'nope'"]),
-    (["--t-end", "1"], ["--t-end needs --dt"]),
+    (["--t-end", "1", "--dt", "2"], ["--dt 2 is larger than --t-end 1"]),
     (["--dt", "0.1"], ["--dt needs --t-end"]),
     (["--input", "F=1"], ["needs --t-end"]),
     (["--input", "F=sin(x)", "--t-end", "1", "--dt", "0.1"], ["--input F", "'x'"]),

@@ -19,8 +19,9 @@ def add_subcommand(sub) -> None:
     >>> args.free, args.max_effects
     ('R.R', 2)
     """
-    from phs.workflows.cli_options import _add_model_options, _positive
+    from phs.workflows.cli_options import _positive
     from phs.workflows.cli_recordings import add_recording_options
+    from phs.workflows.cli_vocabulary import _add_model_options, add_option
 
     p = sub.add_parser(
         "diagnose", help="find where a model misses a recording, which physics is missing, and the fixed model",
@@ -29,16 +30,16 @@ def add_subcommand(sub) -> None:
                     "fit before and after.  Writes a JSON (--json) and an HTML report (--report DIR).")
     _add_model_options(p)
     p.add_argument("data", metavar="DATA", help="CSV recording: a time column, the model's inputs and measured outputs")
-    p.add_argument("--free", metavar="NAME,NAME",
-                   help="nominal parameters refitted with every hypothesis (default: those with a declared range, at most 8)")
+    add_option(p, "--free", detail="the nominal parameters refitted with every hypothesis (default: those with a "
+                                   "declared range, at most 8)")
     add_recording_options(p)
-    p.add_argument("--report", metavar="DIR", help="write DIR/index.html, figures, diagnosis.json and summary.txt")
+    add_option(p, "--report", detail="index.html, figures, diagnosis.json and summary.txt")
     p.add_argument("--effects", metavar="NAME,NAME", help="only these candidate effects (default: the whole library)")
     p.add_argument("--max-effects", type=_positive("--max-effects", integer=True), default=2, metavar="N",
                    help="accept at most N effects one after the other (default 2)")
     p.add_argument("--jobs", type=_positive("--jobs", integer=True), metavar="N",
                    help="processes fitting hypotheses in parallel (default: CPUs, at most 4)")
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_option(p, "--quiet")
     p.set_defaults(run=run_diagnose)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import math
 from dataclasses import dataclass, field
 
@@ -119,6 +120,23 @@ class Diagnosis:
         return "\n".join(lines)
 
     __str__ = summary
+
+    def _repr_html_(self) -> str:
+        """Jupyter: the verdict, the fit before and after, and the ranked hypotheses as small HTML tables
+        (every string escaped)."""
+        from codegen.tables import html_table
+
+        v = self.verdict
+        head = f"Diagnosis of {self.system.name!r}: verdict {v['effect']}, confidence {v['confidence']:.2f}"
+        fits = [(ch, self.nominal.fit_percent[ch], self.nominal.validation_fit_percent[ch], self.final.fit_percent[ch],
+                 self.final.validation_fit_percent[ch]) for ch in self.outputs]
+        hyps = [(h.label, ", ".join(f"{k} {x:.2f}" for k, x in h.validation_fit_percent.items()),
+                 _delta_bic(self.nominal, h), 100 * _gain(self.nominal, h),
+                 "yes" if any(h is a for a in self.accepted) else "") for h in self.hypotheses if h.ok][:8]
+        return (html_table(["output", "nominal fit %", "nominal validation %", "final fit %", "final validation %"],
+                           fits, caption=head)
+                + f"<p>{html.escape(v['explanation'])}</p>"
+                + html_table(["hypothesis", "validation fit %", "ΔBIC", "gain %", "accepted"], hyps))
 
     def write_report(self, directory) -> None:
         """HTML report with figures, and ``diagnosis.json``, into ``directory`` (written atomically)."""

@@ -12,6 +12,8 @@ from phs.workflows.identify.identifiability import analyse, combinations, rank_t
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
 from phs.workflows.identify.sensitivity_table import _sensitivity_table
 
+_COLUMNS = ("parameter", "unit", "initial", "fitted", "std_error", "ci_low", "ci_high")
+
 
 @dataclass
 class IdentificationResult:
@@ -70,6 +72,49 @@ class IdentificationResult:
         return "\n".join(lines)
 
     __str__ = summary
+
+    def to_pandas(self):
+        """One row per free parameter (initial, fitted, std error, 95 % interval) as a pandas DataFrame
+        indexed by parameter name; the parameters' units in ``df.attrs["units"]``.
+
+        Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> from phs.workflows.bundled import recording_path
+        >>> from phs.workflows.identify import identify
+        >>> from phs.workflows.recording import Recording
+        >>> from systems.examples import mass_spring_damper
+        >>> fit = identify(mass_spring_damper(), Recording.from_csv(recording_path("msd_two_tone")), ["k.K"])
+        >>> fit.to_pandas().loc["k.K", "fitted"]  # doctest: +SKIP
+        4.99...
+        """
+        from codegen.tables import require_pandas
+
+        pd = require_pandas("IdentificationResult.to_pandas()")
+        rows = self._rows()
+        df = pd.DataFrame({c: [r[k + 1] for r in rows] for k, c in enumerate(_COLUMNS[1:])},
+                          index=pd.Index([r[0] for r in rows], name="parameter"))
+        df.attrs["units"] = {k: self._unit(k) for k in self.free}
+        df.attrs["fit_percent"] = dict(self.fit_percent)
+        return df
+
+    def _unit(self, name: str) -> str:
+        return self.system.param(name).unit if name in self.system.param_names else ""
+
+    def _rows(self) -> list[tuple]:
+        return [(k, self._unit(k), float(self.initial[k]), float(self.values[k]), float(self.std_errors[k]),
+                 float(self.intervals[k][0]), float(self.intervals[k][1])) for k in self.free]
+
+    def _repr_html_(self) -> str:
+        """Jupyter: the parameters and the fit per channel as small HTML tables (every string escaped)."""
+        from codegen.tables import html_table
+
+        head = (f"Identification of {self.system.name!r}: cost {self.cost:.6g}, {self.iterations} iterations, "
+                f"{self.seconds:.2f} s")
+        fits = [(ch, v, self.validation_fit_percent.get(ch, "")) for ch, v in self.fit_percent.items()]
+        return (html_table(_COLUMNS, self._rows(), caption=head)
+                + html_table(["output", "fit % (training)", "fit % (validation)"], fits))
 
     def identifiability_sentences(self) -> list[str]:
         """One sentence per group of parameters that are not identifiable separately: which they are,

@@ -37,7 +37,8 @@ import numpy as np
 
 from phs.errors import InputDataError, ParameterError, SimulationError
 from phs.io import write_atomic
-from phs.workflows.cli_options import _add_model_options, _check_writable, _finite_or_none, _positive
+from phs.workflows.cli_options import _check_writable, _finite_or_none, _positive, _time_grid
+from phs.workflows.cli_vocabulary import _add_model_options, add_option
 from phs.workflows.inputs import input_signals, parse_assignments
 from phs.workflows.loader import load_model
 from phs.workflows.sweep.design import LogUniform, Uniform, from_fit
@@ -71,21 +72,19 @@ def add_subcommand(sub) -> None:
     p.add_argument("--samples", type=_positive("--samples", integer=True), metavar="N",
                    help="number of samples of the sampled ranges (and --from-fit)")
     p.add_argument("--sampling", choices=("lhs", "random"), default="lhs", help="Latin hypercube (default) or random")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sampling (default 0)")
+    add_option(p, "--seed")
     p.add_argument("--from-fit", metavar="FIT.json", help="sample the fitted parameters of a 'phs fit --json' file")
     p.add_argument("--metric", action="append", default=[], metavar="SPEC",
                    help="peak:SIGNAL, peak_abs:SIGNAL, final:SIGNAL, rise_time:SIGNAL[:START:END], energy, "
                         "passivity_margin, fit:SIGNAL (with --data)")
-    p.add_argument("--t-end", type=_positive("--t-end"), metavar="T", help="final time [s]")
-    p.add_argument("--dt", type=_positive("--dt"), metavar="DT", help="output step [s]")
+    add_option(p, "--t-end")
+    add_option(p, "--dt")
     p.add_argument("--data", metavar="DATA", help="CSV recording: its time grid and inputs drive every run "
                                                    "(and fit:SIGNAL metrics compare with it)")
-    p.add_argument("--input", action="append", default=[], metavar="EXPR",
-                   help="NAME=EXPR or EXPR (single input), as for 'phs simulate'; may use non-parameter variables")
-    p.add_argument("--x0", action="append", default=[], metavar="NAME=VALUE", help="initial value of a state")
-    p.add_argument("--rtol", type=_positive("--rtol"), default=1e-8, help="relative tolerance (default 1e-8)")
-    p.add_argument("--atol", type=_positive("--atol"), help="absolute tolerance on scaled states (default rtol/100)")
-    p.add_argument("--out", required=True, metavar="FILE", help="results file, .parquet or .csv (one row per run)")
+    add_option(p, "--input", detail="expressions may use the non-parameter variables of --range")
+    for name in ("--x0", "--rtol", "--atol"):
+        add_option(p, name)
+    add_option(p, "--out", required=True, detail=".parquet or .csv, one row per run")
     p.add_argument("--resume", action="store_true", help="continue the study in --out: only missing runs run")
     p.add_argument("--retry-failed", action="store_true", help="with --resume, run the failed runs again")
     p.add_argument("--threads", type=_positive("--threads", integer=True), metavar="N",
@@ -94,11 +93,11 @@ def add_subcommand(sub) -> None:
                    help="evaluate on a local Dask cluster of N worker processes")
     p.add_argument("--scheduler", metavar="ADDRESS", help="evaluate on the Dask cluster at ADDRESS (tcp://host:8786)")
     p.add_argument("--chunk", type=_positive("--chunk", integer=True), metavar="N", help="runs per chunk / Dask task")
-    p.add_argument("--plot", metavar="FILE", help="PNG of every metric against every variable")
+    add_option(p, "--plot", detail="every metric against every variable")
     p.add_argument("--max-failed", type=_share, default=MAX_FAILED, metavar="SHARE",
                    help=f"exit with an error when more than this share of the runs failed (default {MAX_FAILED}); "
                         "a study whose every run failed is always an error")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_option(p, "--quiet", detail="no progress bar")
     p.set_defaults(run=run_sweep)
 
 
@@ -300,13 +299,9 @@ def run_sweep(args) -> int:
         recording = Recording.from_csv(args.data, time_column=args.time, mapping=mapping)
         t = None
     else:
-        if args.t_end is None or args.dt is None:
-            raise InputDataError("give the time grid with --t-end and --dt (or a recording with --data)")
-        if args.dt > args.t_end:
-            raise InputDataError(f"--dt {args.dt:g} is larger than --t-end {args.t_end:g}")
-        if args.t_end / args.dt > 1e7:
-            raise InputDataError(f"--t-end / --dt gives {args.t_end / args.dt:.3g} samples; at most 1e7 are allowed")
-        t = np.arange(0.0, args.t_end + args.dt / 2, args.dt)
+        if args.t_end is None:
+            raise InputDataError("give the time grid with --t-end (and --dt) or a recording with --data")
+        t = _time_grid(args.t_end, args.dt)
     metrics = [metric(m, recording) for m in args.metric]
     u, u_for = None, None
     if recording is not None:

@@ -107,10 +107,15 @@ class StudyResult:
         return [(int(r), str(e)) for r, e in zip(self.columns["run"][bad], self.columns["error"][bad])]
 
     def to_pandas(self):
-        """The rows as a pandas DataFrame (needs pandas)."""
-        import pandas as pd
+        """The rows as a pandas DataFrame, one per run; the known units in ``df.attrs["units"]``.
 
-        return pd.DataFrame(self.columns)
+        Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+        """
+        from codegen.tables import require_pandas
+
+        df = require_pandas("StudyResult.to_pandas()").DataFrame(self.columns)
+        df.attrs["units"] = {c: u for c, u in self.units.items() if c in self.columns}
+        return df
 
     def summary(self) -> str:
         """Counts, throughput and the range of each metric over the successful runs."""
