@@ -21,8 +21,7 @@ ROOT = os.path.abspath(os.path.join(HERE, "..", ".."))
 sys.path.insert(0, ROOT)
 
 from codegen import simulator  # noqa: E402
-from components import Damper, LinearSpring, Mass, PositionLoop  # noqa: E402
-from phs import Measured, Param, interconnect, series, symbol_of_state  # noqa: E402
+from examples.concealed_loops import B, plant  # noqa: E402
 from phs.workflows.diagnose import diagnose  # noqa: E402
 from phs.workflows.diagnose.report import write_figures  # noqa: E402
 from phs.workflows.recording import Recording  # noqa: E402
@@ -32,29 +31,17 @@ ap.add_argument("--quick", action="store_true", help="4 s to train and 4 s to va
 ap.add_argument("--out", default=os.path.join(HERE, "..", "figures"), help="directory of the figures")
 args = ap.parse_args()
 
-M, K, B = 0.5, 40.0, 1.0          # plant: mass [kg], spring [N/m], viscous damping [N s/m]
+# plant: mass 0.5 kg, spring 40 N/m, damping B = 1 N s/m; controller K_p 400 N/m, K_d 6 N s/m, reference
+# filter 10 ms, known from its firmware (``examples.concealed_loops``)
 F_C, V_S = 0.4, 2e-3              # concealed dry friction [N] and its smoothing speed [m/s]
-KP, KD, TAU = 400.0, 6.0, 0.01    # controller: gains and reference filter, known from its firmware
 DT = 1e-3
 SPAN = 4.0 if args.quick else 8.0
 
 
 def model(friction: bool):
-    """Plant + PD loop; the truth adds a smooth Coulomb friction ``F_c v / sqrt(v^2 + v_s^2)``."""
-    comps = [Mass("m", m=M), LinearSpring("k", K=K), Damper("b", b=B),
-             PositionLoop("pd", K_p=KP, K_d=KD, tau=TAU, position="k.l", effort="u_c")]
-    members = ["m", "k", "b", "pd"]
-    params = []
-    if friction:
-        fc, vs = Param("F_c", F_C, "N", "dry friction force"), Param("v_s", V_S, "m/s", "friction smoothing speed")
-        v = symbol_of_state("m.p") / M
-        comps.append(Damper("dry", b=fc.symbol / (v**2 + vs.symbol**2) ** 0.5))
-        members.append("dry")
-        params = [fc, vs]
-    # the gains are known: fixed to the firmware's values, not fitted
-    return interconnect("servo", comps, [series(*members)], params=params,
-                        measured=[Measured("position", symbol_of_state("k.l"), "m", "position of the mass")],
-                        description="mass-spring-damper under PD position control on a filtered reference")
+    """Plant + PD loop (``examples.concealed_loops.plant``); the truth adds a smooth Coulomb friction
+    ``F_c v / sqrt(v^2 + v_s^2)``.  The gains are known: fixed to the firmware's values, not fitted."""
+    return plant(b=B, friction=(F_C, V_S) if friction else None)
 
 
 def reference(t, seed):
