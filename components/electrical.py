@@ -21,10 +21,9 @@ class Capacitor(QuadraticStorage):
     name : str
     C : float, Param or expression
         Capacitance [F].
-    state : str, optional
-        Name of the charge state (default ``{name}.Q``).
-    range : (float, float), optional
-        Physical range of the charge (default: the charge at +-10 kV).
+    **kw
+        ``state`` (str): name of the charge state (default ``{name}.Q``); ``range`` ((float, float)):
+        physical range of the charge (default: the charge at +-10 kV).
 
     Examples
     --------
