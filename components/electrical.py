@@ -44,14 +44,14 @@ class Capacitor(QuadraticStorage):
         super().__init__(name, **kw)
         self.C = C
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         return [("C", self.C, "F", "capacitance")]
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         c = values.get("C") or 1e-6
         return (-1e4 * c, 1e4 * c)
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         return x**2 / (2 * self._syms["C"])
 
 
@@ -88,7 +88,7 @@ class VariableCapacitor(Capacitor):
         super().__init__(name, C=C if isinstance(C, sp.Expr) else float(C), **kw)
         self.C_typical = C_typical
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         return (-1e4 * self.C_typical, 1e4 * self.C_typical)
 
 
@@ -112,13 +112,13 @@ class Inductor(QuadraticStorage):
         super().__init__(name, **kw)
         self.L = L
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         return [("L", self.L, "H", "inductance")]
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         return (-10 * (values.get("L") or 1e-3), 10 * (values.get("L") or 1e-3))
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         return x**2 / (2 * self._syms["L"])
 
 

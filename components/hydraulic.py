@@ -63,16 +63,16 @@ class Chamber(QuadraticStorage):
         super().__init__(name, **kw)
         self.k = (k1, k2, k3)
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         units = ("Pa/m**3", "Pa/m**6", "Pa/m**9")
         words = ("linear", "quadratic", "cubic")
         return [(f"k{i + 1}", k, units[i], f"{words[i]} coefficient of the pressure-volume law")
                 for i, k in enumerate(self.k) if not (isinstance(k, (int, float)) and k == 0)]
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         return (-2e-5, 2e-5)
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         e = sp.Integer(0)
         for i in (1, 2, 3):
             if f"k{i}" in self._syms:

@@ -27,16 +27,22 @@ input ``V`` [V] with the conjugate output ``beta p/mu``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from components._base import require_positive
 from phs.component import Component, Dissipator, Piece, Relation, Source
 from phs.errors import ModelError
 from phs.params import EnergyTerm, InputInfo
 
+if TYPE_CHECKING:
+    import numpy as np
+    import sympy as sp
+
 TABLE_I = {"d11": 0.0024, "d12": -0.0004, "d21": 0.4900, "d22": 0.1564, "d31": 0.0383, "d32": 0.0002}
 """Coefficients of eq. 8 (Table I of Doroudchi et al.): force in N, voltage in V, time in s."""
 
 
-def force_coefficients(V, d=None):
+def force_coefficients(V, d=None) -> tuple[float | sp.Expr, float | sp.Expr, float | sp.Expr]:
     """``(b0, b1, b2)`` of eq. 8 at the voltage ``V`` (numbers or sympy expressions).
 
     Examples
@@ -48,7 +54,7 @@ def force_coefficients(V, d=None):
     return d["d11"] * V + d["d12"], d["d21"] * V**2 + d["d22"], d["d31"] * V + d["d32"]
 
 
-def step_force(t, V, d=None):
+def step_force(t, V, d=None) -> np.ndarray | float:
     """Isometric SVA force [N] ``t`` seconds after a voltage step of amplitude ``V`` (eq. 7, typos fixed).
 
     Examples

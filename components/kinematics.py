@@ -70,14 +70,14 @@ class _InverseFunction(sp.Function):
     vector = True
 
     @classmethod
-    def _layout(cls, args):
+    def _layout(cls, args) -> tuple[list[int], int, tuple, tuple]:
         """(indices, n, entries of M, entries of p)."""
         n = _order(len(args) - cls.nindex, cls.vector)
         k = cls.nindex + n * (n + 1) // 2
         return [int(i) for i in args[: cls.nindex]], n, args[cls.nindex: k], args[k:]
 
     @classmethod
-    def eval(cls, *args):
+    def eval(cls, *args) -> sp.Expr | None:
         n = _order(len(args) - cls.nindex, cls.vector)
         if any(not (sp.sympify(i).is_Integer and 0 <= i < n) for i in args[: cls.nindex]):
             raise ModelError(f"{cls.__name__}: indices {args[: cls.nindex]} are not integers in [0, {n})")
@@ -88,7 +88,7 @@ class _InverseFunction(sp.Function):
         return None
 
     @classmethod
-    def _numpy(cls, *args):
+    def _numpy(cls, *args) -> tuple[list[int], np.ndarray, np.ndarray | None]:
         vals = np.broadcast_arrays(*[np.asarray(a, dtype=float) for a in args[cls.nindex:]])
         n = _order(len(vals), cls.vector)
         M = np.empty(vals[0].shape + (n, n))
@@ -222,7 +222,7 @@ class InverseEntry(_InverseFunction):
     vector = False
 
     @classmethod
-    def eval(cls, *args):
+    def eval(cls, *args) -> sp.Expr | None:
         if len(args) > 2 and sp.sympify(args[0]).is_Integer and sp.sympify(args[1]).is_Integer and args[0] > args[1]:
             return cls(args[1], args[0], *args[2:])  # M^-1 is symmetric: keep k <= j
         return super().eval(*args)

@@ -39,14 +39,14 @@ class Mass(QuadraticStorage):
         super().__init__(name, **kw)
         self.m = m
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         return [("m", self.m, "kg", "mass")]
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         m = values.get("m") or 1.0
         return (-10 * m, 10 * m)
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         return x**2 / (2 * self._syms["m"])
 
 
@@ -68,14 +68,14 @@ class RotationalInertia(Mass):
         QuadraticStorage.__init__(self, name, **kw)
         self.m = I
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         return [("I", self.m, "kg*m**2", "moment of inertia")]
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         i = values.get("I") or 1e-6
         return (-100 * i, 100 * i)
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         return x**2 / (2 * self._syms["I"])
 
 
@@ -103,21 +103,21 @@ class LinearSpring(QuadraticStorage):
         super().__init__(name, **kw)
         self.K, self.L0 = K, L0
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         out = [("K", self.K, "N/m", "stiffness")]
         if not (isinstance(self.L0, (int, float)) and self.L0 == 0):
             out.append(("L0", self.L0, "m", "rest length"))
         return out
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         L0 = values.get("L0") or 0.0
         return (L0 - max(L0, 0.1), L0 + max(L0, 0.1))
 
-    def default_rest(self, values):
+    def default_rest(self, values) -> float | None:
         """At rest the spring has its rest length ``L0`` (when ``L0`` has a value)."""
         return values.get("L0")
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         L0 = self._syms.get("L0", 0)
         return self._syms["K"] * (x - L0) ** 2 / 2
 
@@ -141,13 +141,13 @@ class TorsionalSpring(QuadraticStorage):
         super().__init__(name, **kw)
         self.K = K
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         return [("K", self.K, "N*m/rad", "torsional stiffness")]
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         return (-float(sp.pi), float(sp.pi))
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         return self._syms["K"] * x**2 / 2
 
 
@@ -196,13 +196,13 @@ class NonlinearSpring(QuadraticStorage):
         if rotational:
             self.domain = "rotational"
 
-    def parameters(self):
+    def parameters(self) -> list[tuple[str, float | sp.Expr, str, str]]:
         return []
 
-    def default_range(self, values):
+    def default_range(self, values) -> tuple[float, float]:
         return (-0.1, 0.1)
 
-    def energy(self, x):
+    def energy(self, x) -> sp.Expr:
         e = _antiderivative(self.force, self.variable).xreplace({_UPPER: x})
         if e.has(sp.Integral):
             raise ModelError(f"component {self.name!r}: cannot integrate the force law {self.force} in closed form; "

@@ -38,6 +38,8 @@ stretch ``d = -L0 s`` (positive when the actuator is longer than its flat length
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import sympy as sp
 
 from components.electrical import VariableCapacitor
@@ -45,11 +47,14 @@ from phs.component import Component, Piece
 from phs.errors import ModelError
 from phs.params import Condition, EnergyTerm
 
+if TYPE_CHECKING:
+    import numpy as np
+
 EQ3 = {"b1": 1.0, "b2": 21.71, "b3": 0.22, "b4": 0.39}
 """Printed coefficients of eq. 3 (strain in percent, force in N)."""
 
 
-def peano_force(e, b1=EQ3["b1"], b2=EQ3["b2"], b3=EQ3["b3"], b4=EQ3["b4"]):
+def peano_force(e, b1=EQ3["b1"], b2=EQ3["b2"], b3=EQ3["b3"], b4=EQ3["b4"]) -> float | np.ndarray | sp.Expr:
     """Eq. 3: blocking force [N] of the Peano-HASEL at the fit's voltage and contraction strain ``e`` [%].
 
     Works on numbers, numpy arrays and sympy expressions.
@@ -62,7 +67,7 @@ def peano_force(e, b1=EQ3["b1"], b2=EQ3["b2"], b3=EQ3["b3"], b4=EQ3["b4"]):
     return b1 * e + b2 * (1 / (e + b3) - b4)
 
 
-def film_energy(d, k_f, d0):
+def film_energy(d, k_f, d0) -> sp.Expr:
     """Energy [J] of the one-sided film spring at stretch ``d`` [m]; its derivative is the resisting force.
 
     Examples

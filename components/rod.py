@@ -60,7 +60,7 @@ DAMPING = ("stiffness_proportional", "kelvin_voigt")
 configuration (a constant ``R = tau K_0``), or geometrically exact (``R(q)``)."""
 
 
-def element_strains(xa, ya, ta, xb, yb, tb, h, beta=0):
+def element_strains(xa, ya, ta, xb, yb, tb, h, beta=0) -> tuple[sp.Expr, sp.Expr, sp.Expr | float]:
     """Extension, shear and curvature ``(nu1, nu2, kappa)`` of one element from its end nodes.
 
     ``xa, ya, ta`` are the position and cross-section rotation of the first node, ``xb, yb, tb``

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
@@ -29,6 +30,9 @@ import sympy as sp
 from phs.errors import ModelError
 from phs.params import Param
 from phs.units import parse_unit
+
+if TYPE_CHECKING:
+    from phs.system import PHSystem
 
 _MECHANICAL_POSITION = ("m", "rad")
 
@@ -362,7 +366,7 @@ def _add_damping(system, index: int, coefficient: sp.Expr, label: str, params, e
     return _rebuild(system, R=R, params=params, dissipators=diss, effect=effect)
 
 
-def add_damping(system, state: str, coefficient: sp.Expr, params, effect: str):
+def add_damping(system, state: str, coefficient: sp.Expr, params, effect: str) -> PHSystem:
     """``system`` with ``R[state, state] += coefficient`` (a nonnegative expression of the states and
     parameters), recorded as its own dissipating element ``{effect}@{state}``; ``params`` are the new
     parameters the coefficient uses.  The building block of candidates that add a drain or a friction.
@@ -441,7 +445,7 @@ class InputElement(Candidate):
 
     kind = "input"
 
-    def attach_points(self, system):
+    def attach_points(self, system) -> list[str]:
         return list(system.input_names)
 
     @abstractmethod
@@ -457,7 +461,7 @@ class InputElement(Candidate):
         input through unchanged, or None when unknown."""
         return None
 
-    def augment(self, system, where, scales):
+    def augment(self, system, where, scales) -> Augmentation:
         self._check_where(system, where)
         return Augmentation(self.effect, where, self.component, system, [], {}, [], {}, self)
 

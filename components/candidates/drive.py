@@ -28,15 +28,15 @@ class TimeDelay(InputElement):
     summary = "a delay between the commanded input and the response"
     component = "delay u(t − tau_d)"
 
-    def parameters(self, t, u):
+    def parameters(self, t, u) -> list[tuple[str, float, float, float]]:
         T = float(t[-1] - t[0])
         dt = float(np.median(np.diff(t)))
         return [("tau_d", 5 * dt, 0.0, min(0.2 * T, 200 * dt))]
 
-    def transform(self, t, u, theta):
+    def transform(self, t, u, theta) -> np.ndarray:
         return np.interp(t - float(theta[0]), t, u)
 
-    def neutral(self, t, u):
+    def neutral(self, t, u) -> list[float]:
         return [0.0]
 
 
@@ -49,17 +49,17 @@ class InputSaturation(InputElement):
     summary = "the input saturating at large amplitude (drive or actuator limit)"
     component = "soft clip of u to [-U_lo, U_hi]"
 
-    def parameters(self, t, u):
+    def parameters(self, t, u) -> list[tuple[str, float, float, float]]:
         hi = float(np.max(u)) if np.max(u) > 0 else float(np.max(np.abs(u))) or 1.0
         lo = float(-np.min(u)) if np.min(u) < 0 else float(np.max(np.abs(u))) or 1.0
         return [("U_hi", 1.05 * hi, 0.2 * hi, 1.05 * hi), ("U_lo", 1.05 * lo, 0.2 * lo, 1.05 * lo)]
 
-    def neutral(self, t, u):
+    def neutral(self, t, u) -> list[float]:
         # limits far above the peaks: the softplus corners underflow to exactly zero
         peak = float(np.max(np.abs(u))) or 1.0
         return [1e3 * peak, 1e3 * peak]
 
-    def transform(self, t, u, theta):
+    def transform(self, t, u, theta) -> np.ndarray:
         u = np.asarray(u, float)
         w = 0.05 * (float(np.max(np.abs(u))) or 1.0)
 
@@ -80,17 +80,17 @@ class SlewRateLimit(InputElement):
     summary = "the input rising no faster than a maximum rate (amplifier slew-rate limit)"
     component = "rate limiter |du/dt| <= r"
 
-    def parameters(self, t, u):
+    def parameters(self, t, u) -> list[tuple[str, float, float, float]]:
         span = float(np.ptp(u)) or 1.0
         steepest = float(np.max(np.abs(np.diff(u) / np.diff(t)))) or span / float(t[-1] - t[0])
         lo = min(span / float(t[-1] - t[0]), 0.5 * steepest)
         return [("r", steepest, lo, steepest)]
 
-    def neutral(self, t, u):
+    def neutral(self, t, u) -> list[float]:
         # twice the command's steepest slope: the limiter never acts
         return [2 * self.parameters(t, u)[0][3]]
 
-    def transform(self, t, u, theta):
+    def transform(self, t, u, theta) -> np.ndarray:
         r = float(theta[0])
         out = np.empty_like(np.asarray(u, float))
         out[0] = u[0]

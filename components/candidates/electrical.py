@@ -54,10 +54,10 @@ class Leakage(Candidate):
     effect = "leakage"
     summary = "the stored charge or fluid leaking away (a conductance across the storage)"
 
-    def attach_points(self, system):
+    def attach_points(self, system) -> list[str]:
         return with_groups(stored_quantity_states(system))
 
-    def augment(self, system, where, scales):
+    def augment(self, system, where, scales) -> Augmentation:
         self._check_where(system, where)
         members = _members(system, where, stored_quantity_states(system))
         # the conductance that would carry the storage's typical rate at its typical effort, and at
@@ -87,7 +87,7 @@ class ChargeRetention(Candidate):
     effect = "charge_retention"
     summary = "a slow charge drift in the dielectric after each voltage change (charge retention, RC branch)"
 
-    def attach_points(self, system):
+    def attach_points(self, system) -> list[str]:
         # capacitors, and voltage sources (the circuit's side of the electrodes)
         return with_groups(charge_states(system)) + [i.name for i in system.inputs
                                                       if i.kind == "effort" and _same_dimension(i.unit, ("V",))]
@@ -95,7 +95,7 @@ class ChargeRetention(Candidate):
     def _at_input(self, system, where, scales):
         return _charge_retention_at_input(self, system, where, scales)
 
-    def augment(self, system, where, scales):
+    def augment(self, system, where, scales) -> Augmentation:
         self._check_where(system, where)
         if where in system.input_names:
             return self._at_input(system, where, scales)
@@ -205,10 +205,10 @@ class SeriesResistance(Candidate):
     effect = "series_resistance"
     summary = "an extra resistance in series with the source (leads, electrodes, amplifier output)"
 
-    def attach_points(self, system):
+    def attach_points(self, system) -> list[str]:
         return [i.name for i in system.inputs if i.kind == "effort"]
 
-    def augment(self, system, where, scales):
+    def augment(self, system, where, scales) -> Augmentation:
         self._check_where(system, where)
         j = system.input_names.index(where)
         n = len(system.states)

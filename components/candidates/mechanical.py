@@ -18,6 +18,8 @@ Examples
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import sympy as sp
 
 from components.candidates.base import (
@@ -34,7 +36,10 @@ from components.candidates.base import (
     displacement_states,
     momentum_states,
 )
-from phs.params import EnergyTerm, StateInfo
+from phs.params import EnergyTerm, Param, StateInfo
+
+if TYPE_CHECKING:
+    from phs.system import PHSystem
 
 
 class _AtMomentum(_AtStates):
@@ -68,12 +73,12 @@ class CoulombFriction(_AtMomentum):
     summary = "a velocity-independent friction force opposing motion (Coulomb/dry friction)"
     component = "smooth Coulomb friction F_c·v/sqrt(v²+v_s²)"
 
-    def new_params(self, system, first, scales, where):
+    def new_params(self, system, first, scales, where) -> list[Param]:
         _, _, _, f_ref, _, _ = self._refs(system, first, scales)
         return [self.param("F_c", 0.02 * f_ref, f"J/({self._unit(system, first)})",
                            f"Coulomb friction force on {where}", _log_range(f_ref, 1e-4, 10.0))]
 
-    def apply(self, system, member, params, scales, declare, tag):
+    def apply(self, system, member, params, scales, declare, tag) -> tuple[PHSystem, dict[str, float]]:
         i, v, v_ref, _, _, _ = self._refs(system, member, scales)
         coef = params[0].symbol / _smooth_abs(v, 0.02 * v_ref)
         return _add_damping(system, i, coef, f"{self.effect}@{member}", params if declare else [], self.effect), {}
@@ -86,13 +91,13 @@ class QuadraticDrag(_AtMomentum):
     summary = "a drag force growing with the square of velocity (fluid drag)"
     component = "quadratic drag c_d·|v|·v"
 
-    def new_params(self, system, first, scales, where):
+    def new_params(self, system, first, scales, where) -> list[Param]:
         _, _, v_ref, f_ref, _, _ = self._refs(system, first, scales)
         ref = f_ref / v_ref**2
         return [self.param("c_d", 0.02 * ref, f"J*s**2/({self._unit(system, first)})**3",
                            f"quadratic drag coefficient on {where}", _log_range(ref, 1e-5, 100.0))]
 
-    def apply(self, system, member, params, scales, declare, tag):
+    def apply(self, system, member, params, scales, declare, tag) -> tuple[PHSystem, dict[str, float]]:
         i, v, v_ref, _, _, _ = self._refs(system, member, scales)
         coef = params[0].symbol * _smooth_abs(v, 0.02 * v_ref)
         return _add_damping(system, i, coef, f"{self.effect}@{member}", params if declare else [], self.effect), {}
@@ -128,7 +133,7 @@ class ViscoelasticCreep(_AtMomentum):
     summary = "a slow creep/relaxation of the structure after each load change (viscoelasticity)"
     component = "Maxwell arm (spring k_m in series with damper k_m·tau) to ground"
 
-    def new_params(self, system, first, scales, where):
+    def new_params(self, system, first, scales, where) -> list[Param]:
         _, _, _, f_ref, x_ref, _ = self._refs(system, first, scales)
         k_ref = f_ref / x_ref
         tau0 = min(max(0.1 * scales.duration, 20 * scales.dt), 2.0)
@@ -136,11 +141,11 @@ class ViscoelasticCreep(_AtMomentum):
                            f"stiffness of the creep arm on {where}", _log_range(k_ref, 1e-4, 100.0)),
                 self.param("tau", tau0, "s", "creep time constant", (5 * scales.dt, 10 * scales.duration))]
 
-    def starts(self, params, scales):
+    def starts(self, params, scales) -> list[dict[str, float]]:
         k, tau = params
         return [{tau.name: min(10 * tau.value, 0.9 * tau.range[1])}, {tau.name: max(0.1 * tau.value, 1.1 * tau.range[0])}]
 
-    def apply(self, system, member, params, scales, declare, tag):
+    def apply(self, system, member, params, scales, declare, tag) -> tuple[PHSystem, dict[str, float]]:
         _, _, _, _, x_ref, q = self._refs(system, member, scales)
         k, tau = params
         return _arm(system, member, self.effect, _state_name(self.effect, "delta", tag), self._unit(system, member), x_ref, k.symbol,
@@ -161,7 +166,7 @@ class Hysteresis(_AtMomentum):
     summary = "a rate-independent hysteresis loop in force vs. displacement (Dahl/Bouc-Wen friction, plasticity)"
     component = "Bouc-Wen/Dahl hysteresis (k_h z²/2, ż = (1 − eta k_h|z|/F_h) v − |v| k_h z / F_h)"
 
-    def new_params(self, system, first, scales, where):
+    def new_params(self, system, first, scales, where) -> list[Param]:
         _, _, _, f_ref, x_ref, _ = self._refs(system, first, scales)
         k_ref = f_ref / x_ref
         unit = self._unit(system, first)
@@ -171,11 +176,11 @@ class Hysteresis(_AtMomentum):
                            _log_range(f_ref, 1e-4, 10.0)),
                 self.param("eta", -0.2, "1", "asymmetry of loading and unloading (0: Dahl)", (-3.0, 0.9))]
 
-    def starts(self, params, scales):
+    def starts(self, params, scales) -> list[dict[str, float]]:
         k, F, _ = params  # a strong element (comparable to the spring's force), soft and stiff
         return [{k.name: 0.25 * k.value, F.name: 10 * F.value}, {k.name: 2.5 * k.value, F.name: 10 * F.value}]
 
-    def apply(self, system, member, params, scales, declare, tag):
+    def apply(self, system, member, params, scales, declare, tag) -> tuple[PHSystem, dict[str, float]]:
         i, v, v_ref, _, x_ref, q = self._refs(system, member, scales)
         k, F, eta = params
         local = _state_name(self.effect, "z", tag)
@@ -197,10 +202,10 @@ class AddedMass(_AtMomentum):
     summary = "more inertia than modelled (added/entrained mass)"
     component = "inertia scaled by (1 + mu)"
 
-    def new_params(self, system, first, scales, where):
+    def new_params(self, system, first, scales, where) -> list[Param]:
         return [self.param("mu", 0.05, "1", f"added mass as a fraction of the inertia of {where}", (1e-3, 20.0))]
 
-    def apply(self, system, member, params, scales, declare, tag):
+    def apply(self, system, member, params, scales, declare, tag) -> tuple[PHSystem, dict[str, float]]:
         p = system.states[system.state_names.index(member)].symbol
         sub = {p: p / sp.sqrt(1 + params[0].symbol)}
         H = [EnergyTerm(t.label, t.expr.subs(sub)) for t in system.energy_terms]
@@ -216,16 +221,16 @@ class CubicStiffness(_AtStates):
     summary = "a stiffness that changes with deflection (cubic, Duffing-type spring)"
     component = "quartic spring energy k3·q⁴/4"
 
-    def states(self, system):
+    def states(self, system) -> list[str]:
         return displacement_states(system)
 
-    def new_params(self, system, first, scales, where):
+    def new_params(self, system, first, scales, where) -> list[Param]:
         q_ref = scales.get("level", first, 1.0)
         ref = scales.get("coenergy", first, 1.0) / q_ref**3
         unit = _unit_of(system, first)
         return [self.param("k3", 0.05 * ref, f"J/({unit})**4", f"cubic stiffness coefficient of {where}", (-0.3 * ref, 100 * ref))]
 
-    def apply(self, system, member, params, scales, declare, tag):
+    def apply(self, system, member, params, scales, declare, tag) -> tuple[PHSystem, dict[str, float]]:
         q = system.states[system.state_names.index(member)].symbol
         H = list(system.energy_terms) + [EnergyTerm(f"{self.effect}@{member}", params[0].symbol * q**4 / 4)]
         return _rebuild(system, H=H, params=params if declare else [], effect=self.effect), {}

@@ -26,10 +26,10 @@ class Offset(Candidate):
     summary = "a constant offset of the sensor reading"
     kind = "measured"
 
-    def attach_points(self, system):
+    def attach_points(self, system) -> list[str]:
         return list(system.measured_names)
 
-    def augment(self, system, where, scales):
+    def augment(self, system, where, scales) -> Augmentation:
         self._check_where(system, where)
         k = system.measured_names.index(where)
         mo = system.measured[k]
