@@ -53,7 +53,7 @@ from __future__ import annotations
 import sympy as sp
 
 from components import Gravity, VoltageSource
-from phs import Measured, Param, interconnect, parallel, series, symbol_of_output, symbol_of_state
+from phs import Measured, Param, PHSystem, interconnect, parallel, series, symbol_of_output, symbol_of_state
 from phs.errors import ModelError
 from systems._hasel import electrode_branch, pouch_parameters, shell
 
@@ -84,7 +84,7 @@ def default_parameters() -> dict[str, Param]:
 
 
 def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: bool = True, drift: bool = True, untie=(),
-                  **overrides):
+                  **overrides) -> PHSystem:
     """Curling HASEL with ``n_segments`` segments sharing one voltage source.
 
     Parameters

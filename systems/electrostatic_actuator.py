@@ -20,10 +20,10 @@ This is the actuator built step by step in ``docs/tutorials/new_actuator.md``.
 from __future__ import annotations
 
 from components import Damper, LinearSpring, Mass, Resistor, VariableCapacitor, VoltageSource
-from phs import Condition, Measured, Param, interconnect, series, symbol_of_output, symbol_of_state
+from phs import Condition, Measured, Param, PHSystem, interconnect, series, symbol_of_output, symbol_of_state
 
 
-def electrostatic_actuator(**overrides):
+def electrostatic_actuator(**overrides) -> PHSystem:
     """Parallel-plate electrostatic actuator: mass-spring-damper with a gap-dependent capacitor.
 
     Parameters

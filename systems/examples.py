@@ -18,10 +18,10 @@ from components import (
     Resistor,
     VoltageSource,
 )
-from phs import Measured, interconnect, series, symbol_of_state
+from phs import Measured, PHSystem, interconnect, series, symbol_of_state
 
 
-def rc_circuit(R: float = 1e3, C: float = 1e-6):
+def rc_circuit(R: float = 1e3, C: float = 1e-6) -> PHSystem:
     """Voltage source, resistor and capacitor in series (time constant R C).
 
     States: ``C.Q``; input ``U`` [V]; port output ``U.i`` [A] (the source
@@ -43,7 +43,7 @@ def rc_circuit(R: float = 1e3, C: float = 1e-6):
     )
 
 
-def rlc_circuit(R: float = 10.0, L: float = 1e-3, C: float = 1e-6):
+def rlc_circuit(R: float = 10.0, L: float = 1e-3, C: float = 1e-6) -> PHSystem:
     """Series RLC circuit driven by a voltage source.
 
     Examples
@@ -60,7 +60,7 @@ def rlc_circuit(R: float = 10.0, L: float = 1e-3, C: float = 1e-6):
     )
 
 
-def mass_spring_damper(m: float = 1.0, k: float = 4.0, b: float = 0.4):
+def mass_spring_damper(m: float = 1.0, k: float = 4.0, b: float = 0.4) -> PHSystem:
     """Mass on a linear spring and damper, driven by a force ``F``.
 
     States ``k.l`` (elongation) and ``m.p`` (momentum); output ``F.v``.
@@ -79,7 +79,7 @@ def mass_spring_damper(m: float = 1.0, k: float = 4.0, b: float = 0.4):
     )
 
 
-def duffing_oscillator(m: float = 1.0, k: float = 1.0, k3: float = 0.5, b: float = 0.0):
+def duffing_oscillator(m: float = 1.0, k: float = 1.0, k3: float = 0.5, b: float = 0.0) -> PHSystem:
     """Mass on a hardening spring ``F = k q + k3 q**3`` (undamped by default).
 
     Examples

@@ -30,7 +30,7 @@ import math
 from collections.abc import Sequence
 
 from components import CosseratRod, HydrogelActuator
-from phs import Measured, interconnect, series, symbol_of_state
+from phs import Measured, PHSystem, interconnect, series, symbol_of_state
 from phs.errors import ModelError
 
 LENGTH, WIDTH, THICKNESS = 0.045, 0.011, 0.0045  # m
@@ -46,7 +46,7 @@ TAU = 0.05  # s, Kelvin-Voigt retardation time
 
 
 def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17)), V_a: float = 3.6,
-                 tau: float = TAU, lever: float = LEVER, gravity: bool = False, E: float | None = None):
+                 tau: float = TAU, lever: float = LEVER, gravity: bool = False, E: float | None = None) -> PHSystem:
     """The hydrogel arm as a port-Hamiltonian system.
 
     Parameters

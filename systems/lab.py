@@ -24,7 +24,7 @@ def _smooth_sqrt(level: sp.Expr, eps: float) -> sp.Expr:
     return level / (level**2 + eps**2) ** sp.Rational(1, 4)
 
 
-def cascaded_tanks(k1: float = 0.05, k2: float = 0.05, k4: float = 0.05, h0: float = 20.0, eps: float = 0.05):
+def cascaded_tanks(k1: float = 0.05, k2: float = 0.05, k4: float = 0.05, h0: float = 20.0, eps: float = 0.05) -> PHSystem:
     """Two tanks, the upper one draining into the lower one, filled by a pump (Torricelli outflow).
 
     States ``V1``, ``V2``: stored volumes [m³] of tanks of unit cross-section (the level equals the
@@ -77,7 +77,7 @@ def cascaded_tanks(k1: float = 0.05, k2: float = 0.05, k4: float = 0.05, h0: flo
     )
 
 
-def air_chamber(C: float = 5e-7):
+def air_chamber(C: float = 5e-7) -> PHSystem:
     """A closed compressed-air chamber (rigid, isothermal), linearised about atmospheric pressure.
 
     State ``V_a`` [m³]: the air it holds beyond atmospheric content, as a volume at atmospheric
@@ -105,7 +105,7 @@ def air_chamber(C: float = 5e-7):
     )
 
 
-def seal_friction_rig(m: float = 0.5, A: float = 5.3e-4, k: float = 2e5, b: float = 1500.0):
+def seal_friction_rig(m: float = 0.5, A: float = 5.3e-4, k: float = 2e5, b: float = 1500.0) -> PHSystem:
     """A pneumatic piston driven through its stroke by a position-controlled drive, with the chamber
     pressure acting on it and a load cell between drive and rod (viscous seal friction).
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 import sympy as sp
 
 from components import VoltageSource
-from phs import Measured, Param, interconnect, series, symbol_of_output
+from phs import Measured, Param, PHSystem, interconnect, series, symbol_of_output
 from phs.errors import ModelError
 from systems._hasel import electrode_branch, pouch_parameters, shell
 
@@ -64,7 +64,7 @@ def default_parameters(n_shells: int = 4) -> dict[str, Param]:
     return {p.name: p for p in P}
 
 
-def manta_ray_fin(n_shells: int = 4, **overrides):
+def manta_ray_fin(n_shells: int = 4, **overrides) -> PHSystem:
     """Manta-ray fin with ``n_shells`` shells on one chamber and one electrical branch.
 
     Parameters
