@@ -16,11 +16,16 @@ that no controller can move.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import casadi as ca
 import numpy as np
 
 from phs.errors import InputDataError
 from phs.params import c_identifier
+
+if TYPE_CHECKING:
+    import control
 
 _OUTPUTS = ("measured", "port", "all")
 
@@ -97,7 +102,7 @@ def casimir_directions(system, x_eq=None, params=None) -> np.ndarray:
     return rows
 
 
-def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measured"):
+def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measured") -> control.StateSpace:
     """The linearisation of ``system`` at ``(x_eq, u_eq)`` as a named ``control.StateSpace``.
 
     Parameters

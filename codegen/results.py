@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import io
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from codegen.functions import generate
 from phs.io import write_atomic
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
 
 
 class SimulationResult:
@@ -199,7 +204,7 @@ class SimulationResult:
         header, data = self.table()
         write_csv_atomic(path, [f"{name} [{self.unit(name)}]" for name in header], data)
 
-    def to_pandas(self):
+    def to_pandas(self) -> pd.DataFrame:
         """Every signal as a pandas DataFrame indexed by time ``t``; units in ``df.attrs["units"]``.
 
         Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
@@ -222,7 +227,7 @@ class SimulationResult:
         df.attrs["units"] = {name: self.unit(name) for name in header}
         return df
 
-    def plot(self, path=None, fig=None):
+    def plot(self, path=None, fig=None) -> Figure:
         """States (each divided by its typical size), measured outputs (a panel per unit) and the
         energy accounts (H - H(0), supplied and dissipated energy, and the balance residual).
 

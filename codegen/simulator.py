@@ -51,7 +51,7 @@ __all__ = ["simulate", "simulator", "Simulator", "step_windows"]
 
 
 def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: float | None = None,
-             method: str = "cvodes", compile: bool = False):
+             method: str = "cvodes", compile: bool = False) -> SimulationResult:
     """Simulate ``system`` on the time grid ``t``; see :class:`Simulator`.
 
     Examples

@@ -13,9 +13,13 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from types import ModuleType
 
 
-def require_pandas(what: str):
+def require_pandas(what: str) -> ModuleType:
     """The pandas module, or an ImportError of one line naming ``pip install pandas``.
 
     Examples

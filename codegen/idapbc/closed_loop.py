@@ -12,6 +12,8 @@ the trajectory.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import casadi as ca
 import numpy as np
 
@@ -19,6 +21,9 @@ from codegen.functions import generate
 from codegen.idapbc.model import state_vector
 from codegen.results import signal, write_csv_atomic
 from phs.errors import DomainError, InputDataError, SimulationError
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 class ClosedLoopResult:
@@ -79,7 +84,7 @@ class ClosedLoopResult:
     def to_csv(self, path) -> None:
         write_csv_atomic(path, *self.table())
 
-    def plot(self, fig=None, reference=None):
+    def plot(self, fig=None, reference=None) -> Figure:
         """Target, inputs and ``H_d`` against time (a matplotlib figure)."""
         ctrl = self.controller
         if fig is None:

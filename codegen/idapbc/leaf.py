@@ -15,11 +15,16 @@ dependent coordinates ``x_D`` (pivots) follow the free ones ``x_F`` through
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.integrate
 import scipy.linalg
 
 from phs.errors import EquilibriumError
+
+if TYPE_CHECKING:
+    import casadi as ca
 
 
 class Leaf:
@@ -143,7 +148,7 @@ class Leaf:
         K[self.dep] = (K[self.dep] + np.transpose(K[self.dep], (0, 2, 1))) / 2
         return K
 
-    def stepper(self, covector=None, rtol: float = 1e-11):
+    def stepper(self, covector=None, rtol: float = 1e-11) -> ca.Function:
         """A CasADi CVODES integrator moving along the leaf over a straight path of the free coordinates:
         ``(x_from, dx_F) -> (x_D at the end, int v . dx)``, with ``covector`` a CasADi function ``v(x)``."""
         import casadi as ca
@@ -181,7 +186,7 @@ class Leaf:
         cache[key] = F
         return F
 
-    def transport(self, x_from, xf_to, covector=None, rtol: float = 1e-11):
+    def transport(self, x_from, xf_to, covector=None, rtol: float = 1e-11) -> np.ndarray | tuple[np.ndarray, float]:
         """Move along the leaf from ``x_from`` to free coordinates ``xf_to`` (straight path in ``x_F``).
 
         With ``covector`` (a callable ``v(x)``, or a CasADi function for the fast path), also returns

@@ -42,7 +42,7 @@ def closed_loop_modes(ctrl) -> np.ndarray:
     return np.linalg.eigvals(A) if A.size else np.zeros(0)
 
 
-def static_gain(ctrl, with_reference: bool = False):
+def static_gain(ctrl, with_reference: bool = False) -> np.ndarray | tuple[np.ndarray, float]:
     """DC gain of the target closed loop from an input offset to the passive output ``y_d = g^T dH_d/dx``
     (and, with ``with_reference``, the bound ``|C| |A^-1| |g|`` it is compared with to call it zero)."""
     lf = ctrl.leaf

@@ -196,7 +196,7 @@ def electromechanical(JR, g, f_fix, H, x, x_star, u_star_c, stiffness: dict, nam
     return st
 
 
-def potential(JRMM: sp.Matrix, v: sp.Matrix, xm: list, names: list[str], x_star):
+def potential(JRMM: sp.Matrix, v: sp.Matrix, xm: list, names: list[str], x_star) -> tuple[sp.Expr, list[dict], bool]:
     """Solve ``(J - R)_MM (grad Phi - v) = 0`` for Phi(x_M): scalar first-order PDEs along the conserved
     quantities, each given to ``pdsolve`` when small.  Returns ``(Phi, pdes, implicit)``."""
     rows = [i for i in range(JRMM.rows) if any(not _zero(e) for e in JRMM.row(i))]
@@ -302,7 +302,7 @@ def _verify(residual, rhs, variables, center) -> bool:
 
 
 # -- the polynomial / user ansatz ----------------------------------------------------------------
-def quadratic_basis(x, x_star, names):
+def quadratic_basis(x, x_star, names) -> tuple[list[sp.Expr], list[tuple]]:
     """Linear and quadratic monomials of the deviations ``x - x*`` with their labels."""
     d = [xi - sp.Float(v) for xi, v in zip(x, x_star)]
     basis, labels = [], []

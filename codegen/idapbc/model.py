@@ -137,7 +137,7 @@ class Numeric:
     def measured(self, x, u) -> np.ndarray:
         return np.asarray(self.fn.measured(x, u, self.p), dtype=float).reshape(-1)
 
-    def measured_jac(self, x, u):
+    def measured_jac(self, x, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         y, yx, yu = self._meas_jac(x, u, self.p)
         k = len(self.system.measured)
         return (np.asarray(y, dtype=float).reshape(-1), np.asarray(yx, dtype=float).reshape(k, self.n),
