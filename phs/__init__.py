@@ -35,7 +35,7 @@ __all__ = [
 ]
 
 
-def load(path):
+def load(path) -> PHSystem:
     """Load a system saved with :meth:`PHSystem.save`.
 
     Examples

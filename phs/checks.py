@@ -153,7 +153,7 @@ def _symbolic_psd(Mb: sp.Matrix) -> bool | None:
     return True
 
 
-def check_system(system, samples: int = 200, seed: int = 0):
+def check_system(system, samples: int = 200, seed: int = 0) -> CheckReport:
     """Run every structural check on ``system``; see :meth:`PHSystem.check`."""
     items: list[CheckItem] = []
     items.append(CheckItem("J skew-symmetric", "pass", "symbolic", "J + J^T simplifies to zero"))

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from phs.errors import InterconnectionError
 from phs.interconnect import interconnect
 from phs.junctions import feedback_link, series
 from phs.subsystem import _ExternalInput
 
+if TYPE_CHECKING:
+    from phs.system import PHSystem
 
-def feedback(sys1, sys2, pairs, name: str | None = None):
+
+def feedback(sys1, sys2, pairs, name: str | None = None) -> PHSystem:
     """Negative feedback interconnection of two PH systems: ``u1 = -y2 + v1``, ``u2 = y1 + v2``.
 
     Parameters

@@ -29,7 +29,7 @@ import json
 import os
 import tempfile
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import sympy as sp
 
@@ -45,6 +45,8 @@ FORMAT_VERSION = 1
 """Version of the file layout written by :func:`save_system`."""
 
 _MATRICES = ("J", "R", "G", "P", "S", "N")
+
+_Built = TypeVar("_Built")
 
 
 # -- writing ------------------------------------------------------------------------------
@@ -377,7 +379,7 @@ def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
                 structure=structure)
 
 
-def system_from_dict(data: dict, build: Callable[..., Any], source: str = "<dict>"):
+def system_from_dict(data: dict, build: Callable[..., _Built], source: str = "<dict>") -> _Built:
     """Rebuild a system from the dictionary written by :func:`system_to_dict`.
 
     Parameters
@@ -410,7 +412,7 @@ def system_from_dict(data: dict, build: Callable[..., Any], source: str = "<dict
         raise InputDataError(f"cannot load system from {source!r}: the stored model is invalid", [str(exc)]) from None
 
 
-def load_system(path, build: Callable[..., Any]):
+def load_system(path, build: Callable[..., _Built]) -> _Built:
     """Load a system saved with :func:`save_system` (:meth:`PHSystem.load` and :func:`phs.load` call this).
 
     Parameters

@@ -44,7 +44,7 @@ from __future__ import annotations
 import ast
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 import sympy as sp
 
@@ -58,6 +58,8 @@ MAX_EXPONENT = 1000
 
 MAX_BITS = 4096
 """Largest size in bits of an exact integer (numerator or denominator of a rational)."""
+
+_Value = TypeVar("_Value")
 
 MAX_ARGS = 10_000
 """Most arguments of one call (or rows of a matrix, or entries of one row)."""
@@ -181,7 +183,7 @@ def _run(text: str, where: str, error: type[Exception], walk: Callable[[], Any])
 
 
 # -- numbers and powers ------------------------------------------------------------------------------------
-def check_value(value, exact: bool = True):
+def check_value(value: _Value, exact: bool = True) -> _Value:
     """Refuse a built value that is infinite, undefined or too large; return it otherwise.
 
     Rationals are limited to :data:`MAX_BITS` bits; floats, and every number
@@ -204,7 +206,7 @@ def check_value(value, exact: bool = True):
     return value
 
 
-def power(base, exponent, exact: bool = True):
+def power(base, exponent, exact: bool = True) -> sp.Expr:
     """``base**exponent`` with the exponent and the size of the result bounded before computing it.
 
     Examples
@@ -256,11 +258,11 @@ class Arithmetic:
                  exact: bool = False, hint: str = ""):
         self.names, self.functions, self.exact, self.hint = dict(names), dict(functions or {}), exact, hint
 
-    def number(self, value, node, text):
+    def number(self, value, node, text) -> sp.Number:
         """A numeric literal (bounded; exact rationals or floats)."""
         return _number(value, node, text, self.exact)
 
-    def name(self, name: str):
+    def name(self, name: str) -> Any:
         """The value of a name, or a refusal naming it."""
         if name in self.names:
             return self.names[name]
@@ -272,7 +274,7 @@ class Arithmetic:
         """Keyword arguments the call of ``name`` accepts (none)."""
         return frozenset()
 
-    def call(self, name: str, args: list, kwargs: dict):
+    def call(self, name: str, args: list, kwargs: dict) -> Any:
         """A whitelisted function applied to built arguments; infinite results are refused."""
         try:
             value = self.functions[name](*args, **kwargs)
@@ -285,7 +287,7 @@ class Arithmetic:
             raise Refusal(f"{name}({shown if len(shown) <= 40 else '...'}) is not finite")
         return check_value(value, self.exact)
 
-    def binary(self, op: str, a, b):
+    def binary(self, op: str, a, b) -> Any:
         """``a op b`` for an operator in :attr:`operators`, bounded (powers) and checked (division by zero)."""
         if op == "**":
             return power(a, b, self.exact)
@@ -295,13 +297,13 @@ class Arithmetic:
                  "/": lambda: sp.Mul(a, sp.Pow(b, -1)), "%": lambda: sp.Mod(a, b)}[op]()
         return check_value(value, self.exact)
 
-    def negate(self, a):
+    def negate(self, a) -> Any:
         """``-a``."""
         return -a
 
 
 def evaluate(text, where: str, arithmetic: Arithmetic, *, error: type[Exception] = InputDataError,
-             max_length: int = 1000):
+             max_length: int = 1000) -> Any:
     """Value of an infix expression, built node by node by ``arithmetic``.
 
     Raises

@@ -88,7 +88,7 @@ class Constant(Signal):
 
     value: float
 
-    def expr_on(self, a, b):
+    def expr_on(self, a, b) -> sp.Expr:
         return sp.Float(self.value)
 
 
@@ -110,7 +110,7 @@ class Expression(Signal):
         if extra:
             raise InputDataError(f"input expression {self.expr} uses unknown symbols {sorted(map(str, extra))}; only t is allowed")
 
-    def breakpoints(self, t0, t1):
+    def breakpoints(self, t0, t1) -> np.ndarray:
         pts = set()
         for node in sp.preorder_traversal(self.expr):
             args = []
@@ -124,7 +124,7 @@ class Expression(Signal):
                 pts.update(r for r in _zeros(a, t0, t1) if t0 < r < t1)
         return np.array(sorted(pts))
 
-    def expr_on(self, a, b):
+    def expr_on(self, a, b) -> sp.Expr:
         mid = (a + b) / 2
         e = self.expr
         repl = {}
@@ -192,11 +192,11 @@ class Piecewise(Signal):
     def _before(self) -> float:
         return self.levels[0] if self.initial is None else self.initial
 
-    def breakpoints(self, t0, t1):
+    def breakpoints(self, t0, t1) -> np.ndarray:
         prev = [self._before()] + list(self.levels[:-1])
         return np.array([x for x, a, b in zip(self.times, prev, self.levels) if t0 < x < t1 and a != b], dtype=float)
 
-    def expr_on(self, a, b):
+    def expr_on(self, a, b) -> sp.Expr:
         k = int(np.searchsorted(np.asarray(self.times), (a + b) / 2, side="right")) - 1
         return sp.Float(self._before() if k < 0 else self.levels[k])
 
@@ -223,7 +223,7 @@ class Periodic(Signal):
         if not self.period > 0 or not 0 < self.duty < 1:
             raise InputDataError(f"periodic signal: period must be > 0 and 0 < duty < 1 (got {self.period}, {self.duty})")
 
-    def breakpoints(self, t0, t1):
+    def breakpoints(self, t0, t1) -> np.ndarray:
         if t1 <= self.start:
             return np.empty(0)
         if (t1 - max(t0, self.start)) / self.period > _MAX_SWITCHES / 2:
@@ -242,7 +242,7 @@ class Periodic(Signal):
             k += 1
         return np.array(sorted(set(pts)))
 
-    def expr_on(self, a, b):
+    def expr_on(self, a, b) -> sp.Expr:
         mid = (a + b) / 2
         if mid < self.start:
             return sp.Float(self.before if self.before is not None else self.high)
@@ -257,11 +257,11 @@ class Combined(Signal):
     parts: tuple
     op: str
 
-    def breakpoints(self, t0, t1):
+    def breakpoints(self, t0, t1) -> np.ndarray:
         pts = np.concatenate([p.breakpoints(t0, t1) for p in self.parts])
         return np.unique(pts)
 
-    def expr_on(self, a, b):
+    def expr_on(self, a, b) -> sp.Expr:
         es = [p.expr_on(a, b) for p in self.parts]
         return sp.Add(*es) if self.op == "+" else sp.Mul(*es)
 

@@ -165,7 +165,7 @@ def _minimise(evaluate, X, lo, hi):
     return best_x, best_h
 
 
-def follow_outward(evaluate, x, h_min, lo, hi):
+def follow_outward(evaluate, x, h_min, lo, hi) -> tuple[bool, bool, float, np.ndarray]:
     """Follow H outward from ``x``: along the normal of the box faces it lies on, and along each state axis.
 
     Returns ``(on_face_falling, elsewhere_falling, h_far, x_far)``: a direction "falls without

@@ -75,7 +75,7 @@ def register_function(cls: type) -> type:
 
 
 def parse_srepr(text, where: str = "expression", *, error: type[Exception] = InputDataError,
-                max_length: int = 1_000_000):
+                max_length: int = 1_000_000) -> sp.Basic | sp.MatrixBase:
     """Rebuild a sympy object from its ``srepr`` text through the whitelist of stored constructors.
 
     Accepted: ``Integer(n)``, ``Rational(p, q)``, ``Float('digits', precision=n)``,

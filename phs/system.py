@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 from functools import cached_property
 from numbers import Real
+from typing import TYPE_CHECKING
 
 import numpy as np
 import sympy as sp
@@ -21,6 +22,12 @@ import sympy as sp
 from phs.errors import ModelError, ParameterError
 from phs.io import load_system, save_system
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+    from typing import Any
+
+    from phs.checks import CheckReport
 
 _NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, "numpy"]
 
@@ -380,7 +387,7 @@ class PHSystem:
         return out
 
     # -- numeric evaluation ----------------------------------------------------------
-    def lambdify(self, expr, with_u: bool = True):
+    def lambdify(self, expr, with_u: bool = True) -> Callable[..., Any]:
         """Numpy function ``f(x, u, p)`` of a sympy expression or matrix of this system.
 
         Examples
@@ -493,7 +500,7 @@ class PHSystem:
             out += f"; negative parameter values: {', '.join(sorted(negative))}"
         return out
 
-    def check(self, samples: int = 200, seed: int = 0):
+    def check(self, samples: int = 200, seed: int = 0) -> CheckReport:
         """Structural report: skew J, PSD R (symbolic or sampled), H bounded below, units.
 
         Returns

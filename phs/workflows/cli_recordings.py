@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import TYPE_CHECKING
 
 from phs.errors import InputDataError
 from phs.workflows.cli_options import _name_list
 from phs.workflows.cli_vocabulary import add_option
 from phs.workflows.inputs import _names_and_units, parse_assignments
 from phs.workflows.loader import load_model
+
+if TYPE_CHECKING:
+    from phs.system import PHSystem
+    from phs.workflows.recording import Recording
 
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
@@ -99,7 +104,7 @@ def _read_recording(path: str, system, args, mapping: dict, scales: dict, output
         raise InputDataError(str(exc).replace("pass resample=DT", "pass --resample DT")) from None
 
 
-def model_and_recordings(args: argparse.Namespace):
+def model_and_recordings(args: argparse.Namespace) -> tuple[PHSystem, Recording, Recording | None, list[str], list[str], dict]:
     """Load the model and the recordings of a fitting subcommand (``fit``, ``diagnose``), checking every
     name given on the command line first.  Returns ``(system, recording, validation or None, free,
     fitted outputs, x0)``."""

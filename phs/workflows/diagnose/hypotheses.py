@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from phs.signals import Sampled
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.identify.coordinates import CHANNEL_FLOOR
 from phs.workflows.recording import Recording
+
+if TYPE_CHECKING:
+    from codegen.results import SimulationResult
 
 SCREEN_ITER = 3
 """Evaluations of a screening fit: a few Gauss-Newton steps of the joint problem (the candidate's new
@@ -171,7 +175,7 @@ def score(label, system, values, x0, n_params, data: Data, *, augmentation=None,
                   dict(element_values or {}))
 
 
-def train_result(h: Scored, data: Data):
+def train_result(h: Scored, data: Data) -> SimulationResult:
     """The full simulated training trajectory of a scored model (simulated once, then kept)."""
     if h.simulated.get("train") is None:
         el = h.augmentation.element if h.augmentation is not None else None

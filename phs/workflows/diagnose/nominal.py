@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,13 +20,16 @@ from codegen import Simulator
 from phs.errors import PHSError
 from phs.workflows.identify import identify
 
+if TYPE_CHECKING:
+    from phs.workflows.diagnose.hypotheses import Data, Scored
+
 GLOBAL_SAMPLES = 8
 """Points of the global step (a scrambled Sobol sample of the free parameters' ranges, fixed seed)."""
 AGREE = 0.01
 """Starts whose fitted training cost is within this relative margin of the best one agree with it."""
 
 
-def fit_nominal(system, data):
+def fit_nominal(system, data) -> tuple[Scored, Data]:
     """The nominal fit, scored, and ``data`` with the channel weights it ended with (``data.weights``
     ``"ml"``: maximum likelihood, :func:`phs.workflows.identify.identify` with ``weights="ml"``), which
     every hypothesis then fits and is scored with.  ``Scored.starts``: ``{"tried", "agreed", "best"}``.

@@ -5,11 +5,15 @@ from __future__ import annotations
 import html
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from phs.workflows.diagnose import report
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain, calibrated
+
+if TYPE_CHECKING:
+    from phs.system import PHSystem
 
 
 @dataclass
@@ -48,7 +52,7 @@ class Diagnosis:
         return {ch: 1.0 / (float(np.std(np.asarray(self.data.recording[ch], float))) or 1.0) for ch in self.outputs}
 
     @property
-    def final_system(self):
+    def final_system(self) -> PHSystem:
         """The final (augmented and fitted) model."""
         return self.final.system
 

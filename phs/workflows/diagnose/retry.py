@@ -21,6 +21,7 @@ Only when every rung fails is :class:`FitFailed` raised, with every reason.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -70,7 +71,7 @@ def _clip(values: dict, bounds: dict) -> dict:
 
 
 def fit_with_retries(fit_one, starts, *, neutral=None, target=None, bounds=None, log_scale=(), reference=None,
-                     stages=STAGES):
+                     stages=STAGES) -> tuple[Any, str]:
     """Fit through the ladder of rungs of this module; returns ``(result, recovery)``.
 
     Parameters

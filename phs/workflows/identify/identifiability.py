@@ -95,7 +95,7 @@ def _plain(e):
     return int(e) if e == int(e) else float(e)
 
 
-def analyse(J: np.ndarray, D: np.ndarray, tol: float):
+def analyse(J: np.ndarray, D: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, int]:
     """Truncated SVD of the Jacobian ``J`` in relative coordinates ``J * D`` (``D``: column scale).
 
     Returns ``(Hp, P, rank)``: the rank-truncated inverse of ``JᵀJ`` back in fit coordinates

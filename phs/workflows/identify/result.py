@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -11,6 +12,12 @@ from phs.signals import Sampled
 from phs.workflows.identify.identifiability import analyse, combinations, rank_tolerance, unidentified
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
 from phs.workflows.identify.sensitivity_table import _sensitivity_table
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from phs.system import PHSystem
 
 _COLUMNS = ("parameter", "unit", "initial", "fitted", "std_error", "ci_low", "ci_high")
 
@@ -47,7 +54,7 @@ class IdentificationResult:
     unidentifiable: list = field(default_factory=list)
 
     @property
-    def fitted_system(self):
+    def fitted_system(self) -> PHSystem:
         """The system with the fitted parameter values."""
         return self.system.with_params({k: v for k, v in self.values.items() if k in self.system.param_names})
 
@@ -73,7 +80,7 @@ class IdentificationResult:
 
     __str__ = summary
 
-    def to_pandas(self):
+    def to_pandas(self) -> pd.DataFrame:
         """One row per free parameter (initial, fitted, std error, 95 % interval) as a pandas DataFrame
         indexed by parameter name; the parameters' units in ``df.attrs["units"]``.
 
@@ -151,7 +158,7 @@ class IdentificationResult:
         self.validation_fit_percent = fits
         return fits
 
-    def sensitivity_table(self, recording=None, steps=(-0.10, -0.05, 0.0, 0.05, 0.10), channel: str | None = None):
+    def sensitivity_table(self, recording=None, steps=(-0.10, -0.05, 0.0, 0.05, 0.10), channel: str | None = None) -> dict[str, dict]:
         """Fit % when each fitted parameter alone moves by ``steps`` (relative), and the standard deviation.
 
         Returns ``{parameter: {step: fit %, ..., "std": sd}}`` for ``channel`` (default the first output).
@@ -160,7 +167,7 @@ class IdentificationResult:
         self.sensitivity = _sensitivity_table(self, rec, steps, channel or self.outputs[0])
         return self.sensitivity
 
-    def plot(self, path=None, recording=None):
+    def plot(self, path=None, recording=None) -> Figure:
         """Measured versus simulated for each channel (and residuals); returns the matplotlib figure.
 
         Axes are labelled ``name [unit]``; with ``path`` the figure is saved atomically in the format of

@@ -144,7 +144,7 @@ def check_failures(result, max_failed: float = MAX_FAILED) -> None:
     raise SimulationError(f"{why}; first failure, run {run}: {' '.join(error.split())}")
 
 
-def parse_range(item: str):
+def parse_range(item: str) -> tuple[str, list[float] | Uniform | LogUniform]:
     """Parse one ``--range`` value into ``(name, values)`` (a grid axis) or ``(name, distribution)``.
 
     Raises

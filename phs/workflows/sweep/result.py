@@ -5,12 +5,17 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from phs.errors import InputDataError
 from phs.workflows.figures import axis_label, save_figure
 from phs.workflows.sweep.store import read_rows
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from matplotlib.figure import Figure
 
 
 class StudyResult:
@@ -106,7 +111,7 @@ class StudyResult:
         bad = ~self.ok
         return [(int(r), str(e)) for r, e in zip(self.columns["run"][bad], self.columns["error"][bad])]
 
-    def to_pandas(self):
+    def to_pandas(self) -> pd.DataFrame:
         """The rows as a pandas DataFrame, one per run; the known units in ``df.attrs["units"]``.
 
         Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
@@ -154,7 +159,7 @@ class StudyResult:
         """
         return axis_label(column, self.units.get(column, ""))
 
-    def plot(self, path=None, metrics: Sequence[str] | None = None, variables: Sequence[str] | None = None):
+    def plot(self, path=None, metrics: Sequence[str] | None = None, variables: Sequence[str] | None = None) -> Figure:
         """Each metric against each variable (failed runs as red crosses on the lower edge).
 
         With two or more variables, points are coloured by the next variable; axes are labelled
