@@ -40,9 +40,16 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from components.candidates import Augmentation, Candidate, charge_states, displacement_states, momentum_states
+from components.candidates import (
+    Augmentation,
+    Candidate,
+    add_energy,
+    charge_states,
+    displacement_states,
+    momentum_states,
+)
 from components.candidates.base import _add_damping, _rebuild, _unit_of
-from phs.params import EnergyTerm, Param
+from phs.params import Param
 
 EFFECT = "discovered"
 THETA_MAX = 30.0
@@ -51,7 +58,7 @@ THETA_MIN = 1e-9
 """Smallest nonnegative coefficient: zero itself is refused for parameters declared positive."""
 WIDTH = 0.05
 """Width (in ``z``) over which a one-sided spring engages (softplus smoothing)."""
-ENGAGE_AT = (0.3, 0.6)
+ENGAGE_AT = (0.3, 0.45, 0.6, 0.75)
 """Where one-sided springs engage, as shares of the largest deflection reached on each side."""
 
 
@@ -59,32 +66,51 @@ def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name)
 
 
-def _softplus(u, w: float = WIDTH):
-    return w * sp.log(1 + sp.exp(u / w))
+Z, C, E, X = sp.symbols("z c e x", real=True)
+"""Placeholders of the shapes: the scaled state ``z``, the engaging point ``c``, the scaled effort ``e``
+and the scaled displacement ``x`` that modulates a dissipation."""
 
 
-def _sabs(u, eps: float = 1e-3):
-    return sp.sqrt(u**2 + eps**2)
+def _softplus(u):
+    return WIDTH * sp.log(1 + sp.exp(u / WIDTH))
 
 
-# shape name: (function of z (and the engaging point c), sign, words)
+def _sabs(u):
+    return sp.sqrt(u**2 + sp.Float(1e-6))
+
+
+# energy shapes: (phi(z, c), sign, words for a positive coefficient, words for a negative one)
 _ENERGY = {
-    "quartic": (lambda z, c: z**4 / 4, "nonnegative", "a stiffness that rises with the square of the deflection (hardening, quartic energy)"),
-    "sextic": (lambda z, c: z**6 / 6, "nonnegative", "a stiffness that rises steeply at large deflection (sextic energy)"),
-    "abs_cubic": (lambda z, c: (_sabs(z) ** 3 - 1e-9) / 3, "nonnegative", "a stiffness that rises in proportion to |deflection|"),
-    "log_cosh": (lambda z, c: 0.25 * sp.log(sp.cosh(2 * z)), "signed",
-                 "a spring force that saturates with stroke (a stiffness that softens exponentially, as sech²)"),
-    "gauss": (lambda z, c: 0.25 * (1 - sp.exp(-2 * z**2)), "signed",
-              "a stiffness near rest that fades exponentially with stroke (a Gaussian energy well)"),
-    "engage_up": (lambda z, c: _softplus(z - c) ** 2 / 2, "nonnegative", "a one-sided spring that engages when {state} exceeds {at}"),
-    "engage_down": (lambda z, c: _softplus(c - z) ** 2 / 2, "nonnegative", "a one-sided spring that engages when {state} falls below {at}"),
+    "quartic": (Z**4 / 4, "nonnegative", "a stiffness that rises with the square of the deflection (hardening, quartic energy)", ""),
+    "sextic": (Z**6 / 6, "nonnegative", "a stiffness that rises steeply at large deflection (sextic energy)", ""),
+    "abs_cubic": ((_sabs(Z) ** 3 - sp.Float(1e-9)) / 3, "nonnegative", "a stiffness that rises in proportion to |deflection|", ""),
+    "log_cosh": (sp.log(sp.cosh(2 * Z)) / 4, "signed",
+                 "an extra stiffness near rest that softens exponentially with stroke (sech², a saturating spring force)",
+                 "a stiffness lowered near rest that recovers exponentially with stroke (sech²)"),
+    "gauss": ((1 - sp.exp(-2 * Z**2)) / 4, "signed",
+              "an extra stiffness near rest that fades exponentially with stroke (a Gaussian energy well)",
+              "a stiffness lowered near rest that recovers exponentially with stroke (a Gaussian energy hill)"),
+    "engage_up": (_softplus(Z - C) ** 2 / 2, "nonnegative", "a one-sided spring that engages when {state} exceeds {at}", ""),
+    "engage_down": (_softplus(C - Z) ** 2 / 2, "nonnegative", "a one-sided spring that engages when {state} falls below {at}", ""),
+    "quadratic": (Z**2 / 2, "signed", "an added series elastance of {state} (a quadratic energy: a capacitance in series)",
+                  "a capacitance in parallel with {state} (a negative quadratic energy)"),
+    "charge_z": (Z**2 * X / 2, "signed", "a stored energy of {state} that grows with {via} (its capacitance falls as {via} grows)",
+                 "a stored energy of {state} that falls as {via} grows (its capacitance grows with {via})"),
+    "charge_z2": (Z**2 * X**2 / 2, "signed", "a stored energy of {state} that grows with {via}² (capacitance falling away from {via} = 0)",
+                  "a stored energy of {state} that falls with {via}² (its capacitance grows away from {via} = 0)"),
 }
+# dissipation shapes psi(e, x) >= 0 and their words
 _DAMPING = {
-    "abs_effort": (lambda e, z: _sabs(e), "a dissipation on {state} that rises with its effort (|{effort}|)"),
-    "square_effort": (lambda e, z: e**2, "a dissipation on {state} that rises with the square of its effort ({effort}²)"),
-    "square_position": (lambda e, z: z**2, "a dissipation on {state} that rises with the square of {via}"),
-    "abs_position": (lambda e, z: _sabs(z), "a dissipation on {state} that rises with |{via}|"),
+    "abs_effort": (_sabs(E), "a dissipation on {state} that rises with its effort (|∂H/∂{state}|)"),
+    "square_effort": (E**2, "a dissipation on {state} that rises with the square of its effort ((∂H/∂{state})²)"),
+    "square_position": (X**2, "a dissipation on {state} that rises with the square of {via}"),
+    "abs_position": (_sabs(X), "a dissipation on {state} that rises with |{via}|"),
 }
+
+
+def shape(term) -> sp.Expr:
+    """The shape of ``term`` in the placeholders :data:`Z`, :data:`C`, :data:`E`, :data:`X`."""
+    return (_ENERGY if term.kind == "energy" else _DAMPING)[term.shape][0]
 
 
 @dataclass(frozen=True)
@@ -145,24 +171,20 @@ class Term:
         sym = {p.name: scales[p.name] for p in self.scales(system)}
         slug = _slug(self.state)
         if self.kind == "energy":
-            E, z = sym[f"{EFFECT}.{slug}_energy"], q / sym[f"{EFFECT}.{slug}_scale"]
-            if self.via:  # the stored electrical energy modulated by a displacement: (Q/Q_s)^2 z^k
-                x = system.states[system.state_names.index(self.via)].symbol / sym[f"{EFFECT}.{_slug(self.via)}_scale"]
-                k = {"charge_z": 1, "charge_z2": 2}[self.shape]
-                return theta * E * z**2 * x**k / 2
-            return theta * E * _ENERGY[self.shape][0](z, self.c)
+            z = q / sym[f"{EFFECT}.{slug}_scale"]
+            x = system.states[system.state_names.index(self.via)].symbol / sym[f"{EFFECT}.{_slug(self.via)}_scale"] if self.via else 0
+            return theta * sym[f"{EFFECT}.{slug}_energy"] * shape(self).subs({Z: z, C: self.c, X: x})
         e = system.grad_H[system.state_names.index(self.state)] / sym[f"{EFFECT}.{slug}_effort"]
         x = system.states[system.state_names.index(self.via)].symbol / sym[f"{EFFECT}.{_slug(self.via)}_scale"] if self.via else 0
-        return theta * sym[f"{EFFECT}.{slug}_damping"] * _DAMPING[self.shape][0](e, x)
+        return theta * sym[f"{EFFECT}.{slug}_damping"] * shape(self).subs({E: e, X: x})
 
-    def words(self, system) -> str:
-        """What the term's shape means, for a positive coefficient."""
-        if self.kind == "energy" and self.via:
-            return f"a change of the stored energy of {self.state} with {self.via} (its capacitance law)"
+    def words(self, system, sign: float = 1.0) -> str:
+        """What the term's shape means, for a coefficient of sign ``sign``."""
         if self.kind == "energy":
             unit = _unit_of(system, self.state)
-            return _ENERGY[self.shape][2].format(state=self.state, at=f"{self.c * self.q_s:.3g} {unit}")
-        return _DAMPING[self.shape][1].format(state=self.state, effort=f"∂H/∂{self.state}", via=self.via)
+            pos, neg = _ENERGY[self.shape][2:]
+            return (neg if sign < 0 and neg else pos).format(state=self.state, via=self.via, at=f"{self.c * self.q_s:.3g} {unit}")
+        return _DAMPING[self.shape][1].format(state=self.state, via=self.via)
 
 
 def dictionary(system, scales, trajectory=None) -> list[Term]:
@@ -196,7 +218,7 @@ def dictionary(system, scales, trajectory=None) -> list[Term]:
     for q in disp + charges:
         q_s, hi, lo = span(q)
         E_s = scales.get("coenergy", q, 1.0) * q_s
-        shapes = ["quartic", "sextic", "abs_cubic", "log_cosh", "gauss"] if q in disp else ["quartic", "log_cosh"]
+        shapes = ["quartic", "sextic", "abs_cubic", "log_cosh", "gauss"] if q in disp else ["quadratic", "quartic", "log_cosh"]
         for sh in shapes:
             terms.append(Term("energy", q, sh, q_s=q_s, amplitude=E_s, signed=_ENERGY[sh][1] == "signed"))
         if q in disp:
@@ -266,12 +288,12 @@ class Discovered(Candidate):
             for p in t.scales(system):
                 scale.setdefault(p.name, p)
         sym = {k: p.symbol for k, p in scale.items()}
-        H = list(system.energy_terms)
-        energy = [(t, p) for t, p in zip(self.terms, params, strict=True) if t.kind == "energy"]
-        H += [EnergyTerm(f"{EFFECT}@{t.label}", t.expression(system, p.symbol, sym)) for t, p in energy]
-        s = _rebuild(system, H=H, params=list(scale.values()) + [p for _, p in energy], effect=EFFECT)
+        s = _rebuild(system, params=list(scale.values()))
         for t, p in zip(self.terms, params, strict=True):
-            if t.kind == "damping":
+            if t.kind == "energy":
+                s = add_energy(s, f"{EFFECT}@{t.label}", t.expression(s, p.symbol, sym), [p], EFFECT)
+            else:
+                # each term its own dissipating element, so the per-element balance names it
                 s = _add_damping(s, s.state_names.index(t.state), t.expression(s, p.symbol, sym), f"{EFFECT}@{t.label}", [p], EFFECT)
         return s
 

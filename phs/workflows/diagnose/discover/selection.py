@@ -30,6 +30,8 @@ SCREEN_TOP = 3
 """Terms fitted by output error at each forward step (the best screened ones)."""
 MAX_TERMS = 3
 """Most terms a discovered correction holds."""
+NEGLIGIBLE = 1e-6
+"""A coefficient at most this large (in units of its state's scale) after the joint refit: the term is dropped."""
 NUDGE = 0.02
 """Coefficient used to measure a term's output sensitivity (the terms are scaled so 1 is a typical size)."""
 
@@ -47,10 +49,28 @@ class Discovery:
     screened: list = field(default_factory=list)
     seconds: float = 0.0
     reason: str = ""
+    described: list = field(default_factory=list)
+    similar: list = field(default_factory=list)
+    share: float = 0.0
+    text: str = ""
 
     @property
     def found(self) -> bool:
         return self.scored is not None and bool(self.terms)
+
+    def to_dict(self) -> dict:
+        """The documented JSON of a discovery: ``found``, ``terms`` (per term: ``term``, ``state``,
+        ``nature``, ``parameter``, ``coefficient``, ``words``), ``parameters`` (the fitted coefficients
+        and the refitted nominal values), ``description``, ``explained_share``, ``resembles`` (library
+        effect and signature cosine, best first), ``validation_fit_percent``, ``steps``, ``screened``
+        (the ten best screened terms), ``seconds``, ``reason`` (why nothing was found)."""
+        out = {"found": self.found, "seconds": self.seconds, "steps": self.steps,
+               "screened": [{"term": lab, "share": g} for lab, g in self.screened[:10]]}
+        if not self.found:
+            return {**out, "reason": self.reason}
+        return {**out, "terms": self.described, "parameters": dict(self.scored.values), "description": self.text,
+                "explained_share": self.share, "resembles": [{"effect": e, "cosine": c} for e, c in self.similar],
+                "validation_fit_percent": self.scored.validation_fit_percent, "fit_percent": self.scored.fit_percent}
 
     @property
     def values(self) -> dict:
@@ -74,7 +94,7 @@ def _scales(h, data, res):
     return Scales.of(h.system, res.t, X, U, {ch: data.recording[ch] for ch in data.outputs})
 
 
-def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float]]:
+def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float, float]]:
     """First-order share of the training residual each of ``terms`` could remove next to ``chosen``
     and the nominal free parameters, best first (terms that cannot help are left out).
 
@@ -89,7 +109,8 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float]
 
     Returns
     -------
-    list of (Term, float)
+    list of (Term, float, float)
+        Each term with its first-order share and its first-order best coefficient (a fit's start).
     """
     from codegen import Simulator
     from phs.errors import PHSError
@@ -132,9 +153,20 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float]
         coef = float(jp @ r) / jj
         if not t.signed and coef <= 0:
             continue
-        out.append((t, float(jp @ r) ** 2 / jj / rr))
+        out.append((t, float(jp @ r) ** 2 / jj / rr, coef))
     out.sort(key=lambda tg: -tg[1])
     return out
+
+
+def _refit(current, chosen, base, data, progress):
+    """``chosen`` refitted to convergence with the nominal free parameters, from ``current``'s values;
+    ``current`` itself when the refit does not end better or fails the structural checks."""
+    from phs.workflows.diagnose.screening import _run_all
+
+    start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+    aug = Discovered(chosen, start).augment(base.system, chosen[0].state, None)
+    full = _run_all(current, [aug], data, 1, progress, "discover refit")[0]
+    return full if full.ok and not full.no_improvement and full.rss <= current.rss and _passes(full) else current
 
 
 def _passes(h) -> bool:
@@ -175,11 +207,14 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
     for step in range(max_terms):
         ranked = screen(current, chosen, [t for t in terms if t not in chosen], data, base.system)
         if step == 0:
-            out.screened = [(t.label, g) for t, g in ranked]
+            out.screened = [(t.label, g) for t, g, _ in ranked]
         if not ranked:
             break
         start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
-        augs = [Discovered(chosen + [t], start).augment(base.system, (chosen or [t])[0].state, None) for t, _ in ranked[:top]]
+        # each fit starts from the chosen terms' values and the new term's first-order coefficient (a
+        # coefficient starting at exactly zero gives the solver no scale to move it by)
+        augs = [Discovered(chosen + [t], {**start, t.parameter: float(np.clip(c, -1.0, 1.0))}).augment(
+            base.system, (chosen or [t])[0].state, None) for t, _, c in ranked[:top]]
         hyps = _run_all(current, augs, data, n_jobs, progress, f"discover step {step + 1}", joint=False)
         ok = sorted([h for h in hyps if h.ok and not h.no_improvement], key=lambda h: h.bic)
         taken = None
@@ -199,10 +234,12 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         if progress:
             print(f"  discover: chose {', '.join(t.label for t in chosen)}", file=sys.stderr, flush=True)
     if chosen:
-        start = {t.parameter: current.values[t.parameter] for t in chosen}
-        aug = Discovered(chosen, start).augment(base.system, chosen[0].state, None)
-        full = _run_all(current, [aug], data, 1, progress, "discover refit")[0]
-        final = full if full.ok and not full.no_improvement and full.rss <= current.rss and _passes(full) else current
+        final = _refit(current, chosen, base, data, progress)
+        kept = [t for t in chosen if abs(final.values[t.parameter]) > NEGLIGIBLE]
+        if kept and len(kept) < len(chosen):  # a term the joint refit drove to zero is dropped, and the rest refitted
+            pruned = _refit(final, kept, base, data, progress)
+            if pruned.bic <= final.bic + MIN_BIC_GAIN:
+                final, chosen = pruned, kept
         final.stage = "full"
         final.reference_rss, final.reference_bic = base.validation_rss, base.bic
         final.label = f"discovered@{chosen[0].state}"
