@@ -30,6 +30,9 @@ SCREEN_TOP = 3
 """Terms fitted by output error at each forward step (the best screened ones)."""
 MAX_TERMS = 3
 """Most terms a discovered correction holds."""
+MAX_SAMPLES = 5000
+"""Training samples the forward selection fits on (the first ones; the chosen terms are then refitted on
+the whole recording)."""
 NEGLIGIBLE = 1e-6
 """A coefficient at most this large (in units of its state's scale) after the joint refit: the term is dropped."""
 NUDGE = 0.02
@@ -158,14 +161,36 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     return out
 
 
-def _refit(current, chosen, base, data, progress):
+def _window(data, base):
+    """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples (the forward
+    selection's fits; validation scores stay on the whole validation recording); ``data`` itself when
+    short enough or when ``base`` ends in an input element (its transformed input belongs to the whole)."""
+    from dataclasses import replace
+
+    rec = data.recording
+    aug = base.augmentation
+    if len(rec) <= MAX_SAMPLES or (aug is not None and aug.element is not None) or data.train_mask is not None:
+        return data
+    return replace(data, recording=rec.window(rec.t[0], rec.t[MAX_SAMPLES - 1]))
+
+
+def _rescore(h, data):
+    """``h`` (its fitted system and values) scored on ``data``."""
+    from phs.workflows.diagnose.hypotheses import score
+
+    out = score(h.label, h.system, h.values, h.x0, h.n_params, data, augmentation=h.augmentation)
+    out.stage = h.stage
+    return out
+
+
+def _refit(current, chosen, base, data, progress, joint=True):
     """``chosen`` refitted to convergence with the nominal free parameters, from ``current``'s values;
     ``current`` itself when the refit does not end better or fails the structural checks."""
     from phs.workflows.diagnose.screening import _run_all
 
     start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
     aug = Discovered(chosen, start).augment(base.system, chosen[0].state, None)
-    full = _run_all(current, [aug], data, 1, progress, "discover refit")[0]
+    full = _run_all(current, [aug], data, 1, progress, "discover refit", joint=joint)[0]
     return full if full.ok and not full.no_improvement and full.rss <= current.rss and _passes(full) else current
 
 
@@ -203,7 +228,8 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
     res, traj = _trajectory(base, data)
     terms = dictionary(base.system, _scales(base, data, res), traj)
     out = Discovery(base)
-    current, chosen = base, []
+    full_data, data = data, _window(data, base)
+    current, chosen = (base if data is full_data else _rescore(base, data)), []
     for step in range(max_terms):
         ranked = screen(current, chosen, [t for t in terms if t not in chosen], data, base.system)
         if step == 0:
@@ -233,13 +259,20 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         current = taken
         if progress:
             print(f"  discover: chose {', '.join(t.label for t in chosen)}", file=sys.stderr, flush=True)
-    if chosen:
-        final = _refit(current, chosen, base, data, progress)
+    if chosen:  # the chosen terms refitted on the whole training recording
+        short = data is not full_data
+        data = full_data
+        final = _refit(_rescore(current, data) if short else current, chosen, base, data, progress, joint=not short)
         kept = [t for t in chosen if abs(final.values[t.parameter]) > NEGLIGIBLE]
         if kept and len(kept) < len(chosen):  # a term the joint refit drove to zero is dropped, and the rest refitted
-            pruned = _refit(final, kept, base, data, progress)
+            pruned = _refit(final, kept, base, data, progress, joint=not short)
             if pruned.bic <= final.bic + MIN_BIC_GAIN:
                 final, chosen = pruned, kept
+        gain = (base.validation_rss - final.validation_rss) / base.validation_rss if base.validation_rss > 0 else 0.0
+        if short and not (base.bic - final.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN):
+            chosen = []
+            out.reason = "the terms chosen on a window of the training recording did not hold on the whole of it"
+    if chosen:
         final.stage = "full"
         final.reference_rss, final.reference_bic = base.validation_rss, base.bic
         final.label = f"discovered@{chosen[0].state}"
