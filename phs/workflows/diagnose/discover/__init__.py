@@ -62,7 +62,11 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0) -> dict:
     out = dict(verdict)
     if verdict["effect"] == "none":
         out["effect"] = "discovered"
-        out["explanation"] = discovery.text + " No library candidate was accepted. " + verdict["explanation"]
+        library = (verdict["explanation"]
+                   .replace("No missing physics found: no candidate improves the fit beyond what noise explains.",
+                            "No library candidate explains it:")
+                   .replace("No candidate could be fitted; the nominal model stands.", "No library candidate could be fitted."))
+        out["explanation"] = discovery.text + " " + library
         out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)
     else:
         out["explanation"] = verdict["explanation"] + " " + discovery.text

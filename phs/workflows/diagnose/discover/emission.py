@@ -4,8 +4,8 @@
 ``augment`` attaches the fitted terms (coefficients and scales as parameter defaults, with units) with
 the library's public building blocks (:func:`components.candidates.add_energy`,
 :func:`components.candidates.add_damping`), and ``FITTED``: the nominal parameters as refitted with it.
-``cls().augment(system.with_params(FITTED), where, None).system`` is the diagnosed model with the
-correction, and simulates as the fitted one did.
+``cls().augment(system.with_params(FITTED), where, None).system`` is the model it extends (the diagnosed
+model, with any accepted library effect attached) with the correction, and simulates as the fitted one did.
 """
 
 from __future__ import annotations
@@ -91,7 +91,8 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         *[f"* ``{t.label}`` ({t.kind}): {p.name} = {p.value:.6g}" for t, p in zip(terms, thetas, strict=True)],
         "",
         *([f"It explains {100 * share:.0f} % of what the model it extends misses above the noise floor.", ""] if share is not None else []),
-        "``FITTED`` holds the model's own parameters as refitted with it; the diagnosed model with the correction is",
+        "``FITTED`` holds the parameters of the model it extends (the diagnosed model with any accepted library effect)",
+        "as refitted with it; that model with the correction is",
         f"``{name}().augment(system.with_params(FITTED), {terms[0].state!r}, None).system``.",
         '"""',
         "",
@@ -109,7 +110,7 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         f'    """{_first_sentence(description)}"""',
         "",
         f"    effect = {EFFECT!r}",
-        f"    summary = {(description or 'a discovered correction')[:200]!r}",
+        f"    summary = {_first_sentence(description)!r}",
         '    kind = "structure"',
         "",
         "    def attach_points(self, system):",
@@ -144,8 +145,8 @@ def _wrap(text: str, width: int = 100) -> list[str]:
 
 
 def _first_sentence(text: str) -> str:
-    head = (text or "A discovered passive correction.").split(". ")[0].rstrip(".")
-    return (head[:200] + ".").replace('"""', "'''")
+    head = (text or "A discovered passive correction.").split("; ")[0].split(". ")[0].rstrip(".")
+    return (head + ".").replace('"""', "'''")
 
 
 def write_source(path, text: str) -> None:
