@@ -16,6 +16,7 @@ Cases:
     python bench/discover.py                 # novel cases at 20 s, 3 library cases, Silverbox
     python bench/discover.py --quick         # 3 s recordings, two novel cases (smoke test)
     python bench/discover.py --library all   # every in-library case too (long)
+    python bench/discover.py --only silverbox --data ../shared/data
 
 The last line printed is one JSON object: ``novel`` (per case), ``recovered_min_conservative``,
 ``discovery_seconds_max``, ``library`` (per case: verdict, expected, correct), ``silverbox``.
@@ -73,12 +74,12 @@ def library_case(effect: str, seconds: float, jobs) -> dict:
             "discovery_ran": d.discovery is not None, "seconds": time.perf_counter() - t0}
 
 
-def silverbox(jobs) -> dict | None:
+def silverbox(jobs, data_dir=DATA) -> dict | None:
     from components.candidates import LIBRARY
     from phs.workflows.recording import Recording
     from systems.examples import mass_spring_damper
 
-    path = os.path.join(DATA, "silverbox", "SNLS80mV.csv")
+    path = os.path.join(data_dir, "silverbox", "SNLS80mV.csv")
     if not os.path.isfile(path):
         return None
     raw = np.genfromtxt(path, delimiter=",", skip_header=1)
@@ -110,9 +111,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--library", default=",".join(LIBRARY_CASES), help="in-library cases ('all', or none with '')")
     ap.add_argument("--jobs", type=int, default=None)
+    ap.add_argument("--data", default=DATA, help="directory of the real recordings (default ../shared/data)")
+    ap.add_argument("--only", default="", help="comma-separated parts to run: novel, library, silverbox (default all)")
     args = ap.parse_args(argv)
     seconds = 3.0 if args.quick else args.seconds
     novel = ["engaging_spring", "softening_stiffness"] if args.quick else list(NOVEL)
+    parts = set(args.only.split(",")) if args.only else {"novel", "library", "silverbox"}
+    novel = novel if "novel" in parts else []
     results = []
     for e in novel:
         r = novel_case(e, seconds, args.jobs)
@@ -120,7 +125,7 @@ def main(argv=None) -> int:
         print(f"{e:<22} {r['seconds']:6.1f} s (discovery {r['discovery_seconds']:5.1f} s)  verdict {r['verdict']:<18} "
               f"recovered {r['recovered']:.2f}  explained {r['explained_share']:.2f}  passive {r['passive']}", flush=True)
     library = []
-    if not args.quick and args.library:
+    if not args.quick and args.library and "library" in parts:
         from examples.concealed_effects import EFFECTS
 
         names = [e for e in EFFECTS if e != "none"] if args.library == "all" else args.library.split(",")
@@ -129,12 +134,13 @@ def main(argv=None) -> int:
             library.append(r)
             print(f"library {e:<20} verdict {r['verdict']:<20} {'ok' if r['correct'] else 'WRONG'}  discovery ran: {r['discovery_ran']}",
                   flush=True)
-    sb = None if args.quick else silverbox(args.jobs)
+    sb = None if args.quick or "silverbox" not in parts else silverbox(args.jobs, args.data)
     if sb is not None:
         print(f"silverbox without cubic_stiffness: verdict {sb['verdict']}, terms {sb.get('terms')}", flush=True)
     cons = [r["recovered"] for r in results if r["nature"] == "conservative" and r["recovered"] is not None]
     print(json.dumps({"novel": results, "recovered_min_conservative": min(cons) if cons else None,
-                      "discovery_seconds_max": max(r["discovery_seconds"] for r in results), "library": library, "silverbox": sb},
+                      "discovery_seconds_max": max([r["discovery_seconds"] for r in results], default=None), "library": library,
+                      "silverbox": sb},
                      default=str))
     return 0
 

@@ -68,7 +68,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     discover : bool, optional
         Look for a passive correction outside the library (:mod:`phs.workflows.diagnose.discover`):
         None (default) when the final model (the nominal one when no candidate was accepted) leaves a
-        structured residual (RMS above 1.5 times the noise in some channel); True always; False never.
+        structured residual (RMS above 1.5 times the noise in some channel), or when no candidate was
+        accepted and the nominal residual is not white (Ljung-Box p < 0.01 in some channel); True
+        always; False never.
 
     Returns
     -------
@@ -179,7 +181,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if not pool:
             break
     found = None
-    if discover or (discover is None and _structured(current, noise, outs)):
+    if discover or (discover is None and (_structured(current, noise, outs) or (not accepted and _coloured(findings)))):
         from phs.workflows.diagnose.discover import discover as _discover
 
         if progress:
@@ -196,6 +198,11 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)
+
+
+def _coloured(findings) -> bool:
+    """Some channel's residual is not white (its whiteness finding is significant)."""
+    return any(f.kind == "whiteness" and f.details.get("significant") for f in findings)
 
 
 def _through_element(data, h):

@@ -56,15 +56,22 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0) -> dict:
     """The verdict with the discovered correction: effect ``discovered`` when no library effect was
     accepted, ``discovered`` appended to ``effects``, its paragraph appended to the explanation and
     ``verdict["discovered"]`` (see :meth:`Discovery.to_dict`).  A verdict led by the correction has
-    confidence ``0.5 + 0.5 × explained share`` (times ``scale``, the failed hypotheses' factor)."""
+    confidence ``0.5 + 0.5 × explained share`` (times ``scale``, the failed hypotheses' factor).
+
+    Examples
+    --------
+    >>> v = {"effect": "none", "effects": [], "explanation": "", "confidence": 0.9, "failed": []}
+    >>> amend_verdict(v, None) is v   # nothing discovered: the verdict stands
+    True
+    """
     if discovery is None or not discovery.found:
         return verdict
     out = dict(verdict)
     if verdict["effect"] == "none":
         out["effect"] = "discovered"
         library = (verdict["explanation"]
-                   .replace("No missing physics found: no candidate improves the fit beyond what noise explains.",
-                            "No library candidate explains it:")
+                   .replace("No missing physics found: no candidate improves the fit beyond what noise explains. The best,",
+                            "No library candidate explains it: the best,")
                    .replace("No candidate could be fitted; the nominal model stands.", "No library candidate could be fitted."))
         out["explanation"] = discovery.text + " " + library
         out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)

@@ -150,7 +150,16 @@ def _first_sentence(text: str) -> str:
 
 
 def write_source(path, text: str) -> None:
-    """Write emitted source to ``path`` atomically (after checking that it compiles)."""
+    """Write emitted source to ``path`` atomically (after checking that it compiles).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     write_source(os.path.join(d, "c.py"), "X = 1")
+    ...     open(os.path.join(d, "c.py")).read()
+    'X = 1'
+    """
     compile(text, str(path), "exec")
     write_atomic(path, text)
 

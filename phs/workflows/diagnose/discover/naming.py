@@ -25,10 +25,12 @@ def explained_share(reference, h, data, noise: dict) -> float:
 
     ``(ρ_ref − ρ_h) / (ρ_ref − ρ_noise)`` with ``ρ`` the validation residual (sum over channels of RSS
     over the channel's variance) and ``ρ_noise = Σ_ch n σ_ch² / var_ch`` what white noise of std
-    ``σ_ch`` alone leaves; 0 when ``reference`` is already at the noise floor.  ``σ_ch`` is the given
-    noise level (:func:`~phs.workflows.diagnose.mismatch.noise_level`), or the median-based estimate of
-    the same second differences when smaller: steps and fast transients inflate the standard deviation
-    of second differences, never their median.
+    ``σ_ch`` alone leaves; 0 when ``reference`` is already at the noise floor.  ``σ_ch`` is the smallest
+    of the given noise level (:func:`~phs.workflows.diagnose.mismatch.noise_level` of the recording),
+    the median-based estimate of the same second differences (steps and fast transients inflate their
+    standard deviation, not their median) and the noise level of either model's validation residual
+    (a signal sampled slowly against its own motion has large second differences; a good model's
+    residual does not): the lowest floor, so the share is never overstated.
 
     Examples
     --------
@@ -43,7 +45,8 @@ def explained_share(reference, h, data, noise: dict) -> float:
     for ch in data.outputs:
         y = np.asarray(data.validation[ch], float)[data.val_mask]
         var = float(np.var(y)) or 1.0
-        sigma = min(float(noise.get(ch, 0.0)), _robust_noise(y)) if noise.get(ch) else 0.0
+        sigma = min([float(noise.get(ch, 0.0)), _robust_noise(y)] + [_residual_noise(m, ch, y, data.val_mask) for m in (reference, h)])
+        sigma = sigma if noise.get(ch) else 0.0
         floor += len(y) * sigma**2 / var
     room = reference.validation_rss - floor
     if not (math.isfinite(room) and room > 0 and math.isfinite(h.validation_rss)):
@@ -55,6 +58,16 @@ def _robust_noise(y) -> float:
     """White-noise std from the median absolute deviation of second differences (``1.4826 MAD / √6``)."""
     d = np.diff(np.asarray(y, float), 2)
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(6.0)) if d.size else 0.0
+
+
+def _residual_noise(model, ch, y, mask) -> float:
+    from phs.workflows.diagnose.mismatch import noise_level
+
+    try:
+        r = y - np.asarray(model.simulated["validation"][ch], float)[mask]
+    except (AttributeError, KeyError, TypeError):
+        return math.inf
+    return noise_level(r)
 
 
 def _signature(h, ref, data) -> np.ndarray | None:
@@ -72,7 +85,18 @@ def _signature(h, ref, data) -> np.ndarray | None:
 
 def resemblance(discovered, base, nominal, hypotheses, data) -> list[tuple[str, float]]:
     """Cosine between the discovered correction's output signature (against ``base``, the model it
-    extends) and each library hypothesis' (against ``nominal``), best first, one entry per effect."""
+    extends) and each library hypothesis' (against ``nominal``), best first, one entry per effect.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> import numpy as np
+    >>> data = NS(outputs=["y"], validation={"y": np.arange(4.0)}, val_mask=np.ones(4, bool))
+    >>> run = lambda y: NS(simulated={"validation": {"y": np.asarray(y, float)}}, ok=True, no_improvement=False)
+    >>> lib = run([0, 2, 0, 2]); lib.augmentation = NS(effect="offset")
+    >>> [(e, round(c, 6)) for e, c in resemblance(run([0, 1, 0, 1]), run([0, 0, 0, 0]), run([0, 0, 0, 0]), [lib], data)]
+    [('offset', 1.0)]
+    """
     sig = _signature(discovered, base, data)
     if sig is None or not np.any(sig):
         return []
@@ -90,8 +114,18 @@ def resemblance(discovered, base, nominal, hypotheses, data) -> list[tuple[str, 
 
 
 def describe(terms, values: dict, system) -> list[dict]:
-    """Per term: ``term``, ``state``, ``nature`` (``conservative``/``dissipative``), ``coefficient`` and
-    ``words``."""
+    """Per term: ``term``, ``state``, ``nature`` (``conservative``/``dissipative``), ``parameter``,
+    ``coefficient`` and ``words``.
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> from phs.workflows.diagnose.discover.dictionary import Term
+    >>> t = Term("energy", "k.l", "quartic")
+    >>> d = describe([t], {t.parameter: 2.0}, mass_spring_damper())[0]
+    >>> d["nature"], d["words"].split(" (")[0]
+    ('conservative', 'a stiffness that rises with the square of the deflection')
+    """
     out = []
     for t in terms:
         theta = float(values.get(t.parameter, 0.0))
@@ -103,7 +137,13 @@ def describe(terms, values: dict, system) -> list[dict]:
 
 
 def sentence(described: list[dict], similar: list[tuple[str, float]], share: float) -> str:
-    """The discovered correction in one paragraph."""
+    """The discovered correction in one paragraph.
+
+    Examples
+    --------
+    >>> sentence([{"words": "a damping that rises with speed"}], [("quadratic_drag", 0.93)], 0.45)[:80]
+    'Discovered correction: a damping that rises with speed. It resembles the library'
+    """
     parts = "; ".join(d["words"] for d in described)
     if similar and similar[0][1] >= RESEMBLES:
         like = f" It resembles the library's {similar[0][0]} (signature cosine {similar[0][1]:.2f})."
