@@ -3,8 +3,8 @@
 The recordings come from ``examples/concealed_novel.py``: the electrostatic actuator with a fringe-field
 capacitance, a leakage that heats, a one-sided spring engaging part-way through the stroke, or a stiffness
 softening exponentially with stroke.  Fast tests run the discovery step alone on a short recording; the
-whole diagnosis of every case (library and discovery), the in-library cases and Silverbox run with
-``-m slow`` (and ``bench/discover.py``).
+whole diagnosis of every case (library and discovery) and the in-library cases run with ``-m slow``
+(and ``bench/discover.py``); Silverbox without the cubic stiffness is in ``test_diagnose_real.py``.
 """
 
 from __future__ import annotations
@@ -157,34 +157,3 @@ def test_in_library_verdicts_stand(effect):
     assert d.effect == effect, d.summary()
     assert d.discovery is None or d.verdict["effects"][0] == effect
 
-
-@pytest.mark.slow
-def test_silverbox_without_cubic_stiffness_discovers_a_hardening_spring():
-    import os
-
-    from components.candidates import LIBRARY
-    from phs.workflows.recording import Recording
-    from systems.examples import mass_spring_damper
-
-    path = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "silverbox", "SNLS80mV.csv")
-    if not os.path.isfile(path):
-        pytest.skip(f"{os.path.normpath(path)} not found")
-    raw = np.genfromtxt(path, delimiter=",", skip_header=1)
-    fs = 1e7 / 2**14
-    v1, v2 = raw[:, 0] - raw[:, 0].mean(), raw[:, 1] - raw[:, 1].mean()
-    n, start = 600, 40000 - 600  # as tests/workflows/test_diagnose_real.py
-    rec = Recording.from_arrays(np.arange(n) / fs, {"F": v1[start:start + n] * 1e5, "position": v2[start:start + n]})
-    y, u = rec["position"], rec["F"]
-    a1, a2, b1, b2 = np.linalg.lstsq(np.column_stack([y[1:-1], y[:-2], u[1:-1], u[:-2]]), y[2:], rcond=None)[0]
-    s = np.log(np.roots([1.0, -a1, -a2])[0]) * fs
-    k = (1 - a1 - a2) / (b1 + b2)
-    model = mass_spring_damper(m=k / abs(s) ** 2, k=k, b=2 * (-s.real / abs(s)) * k / abs(s))
-    d = diagnose(model, rec, free=["m.m", "k.K", "b.b"], outputs=["position"],
-                 candidates=[c for c in LIBRARY if c.effect != "cubic_stiffness"])
-    assert d.discovery is not None and d.discovery.found, d.summary()
-    position = [x for x in d.discovery.described if x["state"] == "k.l"]
-    assert position and all(x["nature"] == "conservative" for x in position), d.summary()
-    # hardening: a growing (nonnegative) energy shape on the position
-    assert any(x["term"].split(":")[1] in ("quartic", "sextic", "abs_cubic") and x["coefficient"] > 0 for x in position)
-    assert d.structure_checks()["ok"]
-    assert d.final.validation_fit_percent["position"] >= d.nominal.validation_fit_percent["position"] + 3.0
