@@ -119,7 +119,34 @@ def test_command_line_discover_flags(tmp_path):
 
         run_diagnose(build_parser().parse_args(["diagnose", "m:f", "d.csv", "--no-discover", "--discover-out", str(out)]))
     assert not out.exists()
-    assert main is not None
+
+
+def test_command_line_writes_the_discovered_component(tmp_path):
+    """``phs diagnose --discover-out``: a hardening spring outside a library holding only an offset."""
+    from codegen import simulate
+    from components.candidates import add_energy
+    from systems.examples import mass_spring_damper
+
+    msd = mass_spring_damper()
+    q = msd.states[msd.state_names.index("k.l")].symbol
+    truth = add_energy(msd, "stiffening", 2.0 * q**4 / 4, [], "stiffening")
+    t = np.linspace(0.0, 12.0, 601)
+    F = 3.0 * np.sin(2 * np.pi * 0.4 * t) * np.minimum(t / 4.0, 1.0)
+    y = simulate(truth, t, u={"F": F})["position"] + 0.005 * np.random.default_rng(0).standard_normal(t.size)
+    csv = tmp_path / "run.csv"
+    np.savetxt(csv, np.column_stack([t, F, y]), delimiter=",", header="t,F,position", comments="")
+    out, js = tmp_path / "correction.py", tmp_path / "d.json"
+    assert main(["diagnose", "systems.examples:mass_spring_damper", str(csv), "--free", "k.K,b.b", "--effects", "offset",
+                 "--discover-out", str(out), "--json", str(js), "--jobs", "1", "--quiet"]) == 0
+    doc = json.loads(js.read_text())
+    assert doc["verdict"]["effect"] == "discovered" and doc["discovered"]["terms"][0]["state"] == "k.l"
+    assert doc["verdict"]["explained_share"] > 0.9
+    spec = importlib.util.spec_from_file_location("correction", out)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cls = next(v for k, v in vars(mod).items() if k.startswith("Discovered") and isinstance(v, type))
+    aug = cls().augment(mass_spring_damper().with_params(mod.FITTED), "k.l", None)
+    assert aug.system.check().ok
 
 
 # -- slow: whole diagnoses ----------------------------------------------------------------------------------------------
