@@ -137,7 +137,9 @@ def test_command_line_writes_the_discovered_component(tmp_path):
     np.savetxt(csv, np.column_stack([t, F, y]), delimiter=",", header="t,F,position", comments="")
     out, js = tmp_path / "correction.py", tmp_path / "d.json"
     assert main(["diagnose", "systems.examples:mass_spring_damper", str(csv), "--free", "k.K,b.b", "--effects", "offset",
-                 "--discover-out", str(out), "--json", str(js), "--jobs", "1", "--quiet"]) == 0
+                 "--discover-out", str(out), "--json", str(js), "--report", str(tmp_path / "report"), "--jobs", "1", "--quiet"]) == 0
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert "Discovered correction" in page and "of what the nominal model misses" in page
     doc = json.loads(js.read_text())
     assert doc["verdict"]["effect"] == "discovered" and doc["discovered"]["terms"][0]["state"] == "k.l"
     assert doc["verdict"]["explained_share"] > 0.9
