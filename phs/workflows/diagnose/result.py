@@ -112,8 +112,8 @@ class Diagnosis:
         lines = [f"Diagnosis of {self.system.name!r} ({self.seconds:.1f} s): verdict {v['effect']}"
                  + (f" (effects: {', '.join(v['effects'])})" if len(v["effects"]) > 1 else "")
                  + f", confidence {v['confidence']:.2f}", "  " + v["explanation"],
-                 f"  the named effect explains {100 * v.get('explained_share', 0.0):.0f} % of what the nominal model misses "
-                 "(above the noise floor)"]
+                 (f"  the named effect explains {100 * v.get('explained_share', 0.0):.0f} % of what the nominal model misses "
+                  "(above the noise floor)" if v["effect"] != "none" else "  no effect named (explained share 0 %)")]
         lines.append("  fit % (training / validation):")
         for ch in self.outputs:
             lines.append(f"    {ch}: nominal {self.nominal.fit_percent[ch]:.2f} / {self.nominal.validation_fit_percent[ch]:.2f}"

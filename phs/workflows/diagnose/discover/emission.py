@@ -13,17 +13,13 @@ from __future__ import annotations
 import re
 
 from phs.io import write_atomic
-from phs.workflows.diagnose.discover.dictionary import EFFECT, C, Discovered, shape
+from phs.workflows.diagnose.discover.dictionary import EFFECT, C, Discovered, _slug, shape
 
 _FUNCTIONS = ("cosh", "exp", "log", "sqrt")
 
 
 def _class_name(system_name: str) -> str:
     return "Discovered" + "".join(w.capitalize() for w in re.split(r"[^0-9A-Za-z]+", system_name) if w)
-
-
-def _slug(name: str) -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in name)
 
 
 def _param(p, indent: str) -> str:
