@@ -20,7 +20,8 @@ from phs.errors import InputDataError, PHSError
 from phs.workflows.cli import main
 from phs.workflows.diagnose import diagnose, noise_level
 from phs.workflows.diagnose.discover import Discovered, dictionary, discover, source
-from phs.workflows.diagnose.hypotheses import Data, _simulate, fit_nominal
+from phs.workflows.diagnose.hypotheses import Data, _simulate
+from phs.workflows.diagnose.nominal import fit_nominal
 from systems.electrostatic_actuator import electrostatic_actuator
 
 FREE = ["k", "b", "eps"]
@@ -36,7 +37,7 @@ def _data(effect, seconds):
 def softening():
     """Discovery alone on the softening-stiffness case (2 s recordings)."""
     data, info, vinfo = _data("softening_stiffness", 2.0)
-    nominal = fit_nominal(electrostatic_actuator(), data)
+    nominal, data = fit_nominal(electrostatic_actuator(), data)
     noise = {ch: noise_level(data.recording[ch]) for ch in data.outputs}
     return discover(nominal, nominal, data, noise, n_jobs=1), nominal, data, info, vinfo
 

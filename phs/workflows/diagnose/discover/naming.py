@@ -23,8 +23,8 @@ RESEMBLES = 0.8
 def explained_share(reference, h, data, noise: dict) -> float:
     """Share of what ``reference`` misses above the noise floor that ``h`` explains, in [0, 1].
 
-    ``(ρ_ref − ρ_h) / (ρ_ref − ρ_noise)`` with ``ρ`` the validation residual (sum over channels of RSS
-    over the channel's variance) and ``ρ_noise = Σ_ch n σ_ch² / var_ch`` what white noise of std
+    ``(ρ_ref − ρ_h) / (ρ_ref − ρ_noise)`` with ``ρ`` the validation residual (sum over channels of
+    weighted RSS, by default over the channel's variance) and ``ρ_noise = Σ_ch n σ_ch² w_ch²`` what white noise of std
     ``σ_ch`` alone leaves; 0 when ``reference`` is already at the noise floor.  ``σ_ch`` is the smallest
     of the given noise level (:func:`~phs.workflows.diagnose.mismatch.noise_level` of the recording),
     the median-based estimate of the same second differences (steps and fast transients inflate their
@@ -44,10 +44,11 @@ def explained_share(reference, h, data, noise: dict) -> float:
     floor = 0.0
     for ch in data.outputs:
         y = np.asarray(data.validation[ch], float)[data.val_mask]
-        var = float(np.var(y)) or 1.0
+        weights = getattr(data, "weights", None)  # the scores' channel weights (default 1 / std)
+        w2 = weights[ch] ** 2 if isinstance(weights, dict) else 1.0 / (float(np.var(y)) or 1.0)
         sigma = min([float(noise.get(ch, 0.0)), _robust_noise(y)] + [_residual_noise(m, ch, y, data.val_mask) for m in (reference, h)])
         sigma = sigma if noise.get(ch) else 0.0
-        floor += len(y) * sigma**2 / var
+        floor += len(y) * sigma**2 * w2
     room = reference.validation_rss - floor
     if not (math.isfinite(room) and room > 0 and math.isfinite(h.validation_rss)):
         return 0.0
