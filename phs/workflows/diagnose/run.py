@@ -68,8 +68,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     discover : bool, optional
         Look for a passive correction outside the library (:mod:`phs.workflows.diagnose.discover`):
         None (default) when the final model (the nominal one when no candidate was accepted) leaves a
-        structured residual (RMS above 1.5 times the noise in some channel), or when no candidate was
-        accepted and the nominal residual is not white (Ljung-Box p < 0.01 in some channel); True
+        structured residual (RMS above 1.5 times the noise in some channel) or a residual that is not
+        white (Ljung-Box p < 0.01 in some channel, RMS at least 1 % of its standard deviation); True
         always; False never.
 
     Returns
@@ -181,14 +181,16 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if not pool:
             break
     found = None
-    if discover or (discover is None and (_structured(current, noise, outs) or (not accepted and _coloured(findings)))):
+    final_findings = _locate(current, current.system, data, noise) if accepted else findings
+    if discover or (discover is None and (_structured(current, noise, outs) or _coloured(final_findings, current, data))):
         from phs.workflows.diagnose.discover import discover as _discover
 
         if progress:
             print(f"diagnose {system.name}: discovering a correction outside the library", file=sys.stderr, flush=True)
         found = _discover(current, nominal, data, noise, all_hyps, n_jobs=n_jobs, progress=progress)
     final = found.scored if found is not None and found.found else current
-    final_findings = _locate(final, final.system, data, noise) if final is not nominal else findings
+    if final is not current:
+        final_findings = _locate(final, final.system, data, noise)
     failed = [h for r in rounds for h in r if not h.ok]
     verdict = _verdict(nominal, accepted, all_hyps, findings, outs, failed)
     if found is not None:
@@ -200,9 +202,20 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                      time.perf_counter() - wall, rounds, data, final_findings, found)
 
 
-def _coloured(findings) -> bool:
-    """Some channel's residual is not white (its whiteness finding is significant)."""
-    return any(f.kind == "whiteness" and f.details.get("significant") for f in findings)
+RELEVANT = 0.01
+"""A residual counts as left structure only from this share of its channel's standard deviation (RMS)."""
+
+
+def _coloured(findings, h, data) -> bool:
+    """Some channel's residual is not white (its whiteness finding is significant) and not negligible
+    (RMS at least :data:`RELEVANT` of the channel's standard deviation: a noise-free recording fitted to
+    rounding leaves a coloured but meaningless residual)."""
+    for f in findings:
+        if f.kind == "whiteness" and f.details.get("significant") and f.channel in h.residuals:
+            r = np.asarray(h.residuals[f.channel], float)
+            if float(np.sqrt(np.mean(r**2))) >= RELEVANT * (float(np.std(data.recording[f.channel])) or 1.0):
+                return True
+    return False
 
 
 def _through_element(data, h):
