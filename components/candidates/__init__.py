@@ -69,6 +69,7 @@ from components.candidates.base import (
     InputElement,
     Scales,
     add_damping,
+    add_energy,
     charge_states,
     displacement_states,
     momentum_states,
@@ -83,7 +84,7 @@ from components.candidates.sensor import Offset
 
 __all__ = [
     "Scales", "Augmentation", "Candidate", "InputElement", "LIBRARY", "EFFECTS", "lookup", "momentum_states", "displacement_states",
-    "charge_states", "stored_quantity_states", "add_damping", "with_groups", "ChargeRetention", "Leakage", "SeriesResistance",
+    "charge_states", "stored_quantity_states", "add_damping", "add_energy", "with_groups", "ChargeRetention", "Leakage", "SeriesResistance",
     "CoulombFriction", "ViscoelasticCreep",
     "CubicStiffness", "Hysteresis", "QuadraticDrag", "AddedMass", "InputSaturation", "SlewRateLimit", "TimeDelay", "Offset",
 ]

@@ -382,6 +382,27 @@ def add_damping(system, state: str, coefficient: sp.Expr, params, effect: str) -
     return _add_damping(system, system.state_names.index(state), coefficient, f"{effect}@{state}", params, effect)
 
 
+def add_energy(system, label: str, energy: sp.Expr, params, effect: str):
+    """``system`` with the energy term ``energy`` (an expression of the states and parameters, labelled
+    ``label``) added to its Hamiltonian; ``params`` are the new parameters it uses.  The forces come
+    from its gradient through the system's own ``J``: the building block of candidates that add a
+    storage (a spring term, a nonlinear capacitance).
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> from phs import Param
+    >>> s = mass_spring_damper()
+    >>> k3 = Param("k3", 1.0, "N/m**3", "cubic stiffness")
+    >>> q = s.states[s.state_names.index("k.l")].symbol
+    >>> add_energy(s, "k3@k.l", k3.symbol * q**4 / 4, [k3], "stiffening").energy_terms[-1].label
+    'k3@k.l'
+    """
+    from phs.params import EnergyTerm
+
+    return _rebuild(system, H=list(system.energy_terms) + [EnergyTerm(label, energy)], params=params, effect=effect)
+
+
 def _smooth_abs(v: sp.Expr, eps: float) -> sp.Expr:
     return sp.sqrt(v**2 + sp.Float(eps) ** 2)
 

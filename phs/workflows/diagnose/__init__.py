@@ -6,8 +6,10 @@ lags, amplitude scaling, whiteness, drift), (3) attaches every candidate of the 
 (:mod:`components.candidates`) at every place it fits, (4) fits each augmented model (the new
 parameters together with the nominal free ones) and ranks them by validation fit and BIC, keeping the
 simplest sufficient explanation and trying a second effect only when the first leaves a structured
-residual, and (5) explains the verdict in words, with the augmented model's structural checks
-(J skew, R positive semi-definite) and the fit before and after.
+residual, (5) when the residual stays structured, discovers a passive correction outside the library
+(:mod:`phs.workflows.diagnose.discover`: an added energy or dissipation sparse over the model's own
+states), and (6) explains the verdict in words, with the share of the mismatch it explains, the
+augmented model's structural checks (J skew, R positive semi-definite) and the fit before and after.
 
 Acceptance rule of a hypothesis (documented in ``docs/workflows/diagnose.md``): its training BIC is at
 least :data:`MIN_BIC_GAIN` below the nominal model's, and its validation residual (sum over channels of
@@ -22,7 +24,8 @@ The parts, each importing only those listed after it: :mod:`~phs.workflows.diagn
 :mod:`~phs.workflows.diagnose.mismatch` (noise level, model signals, located mismatch),
 :mod:`~phs.workflows.diagnose.ranking` (scores, acceptance, choice),
 :mod:`~phs.workflows.diagnose.hypotheses` (fitting one model, never worse than its neutral point),
-:mod:`~phs.workflows.diagnose.retry` (retrying a failing fit) and :mod:`~phs.workflows.diagnose.locate`.
+:mod:`~phs.workflows.diagnose.retry` (retrying a failing fit), :mod:`~phs.workflows.diagnose.locate` and
+:mod:`~phs.workflows.diagnose.discover` (corrections outside the library).
 
 A hypothesis is never lost: a failing fit is retried (neutral start, tighter bounds, continuation), a
 fit ending worse than the nominal model is replaced by its neutral point, and one that fails after every

@@ -16,8 +16,10 @@ def add_subcommand(sub) -> None:
     --------
     >>> from phs.workflows.cli import build_parser
     >>> args = build_parser().parse_args(["diagnose", "systems.examples:rc_circuit", "data.csv", "--free", "R.R"])
-    >>> args.free, args.max_effects
-    ('R.R', 2)
+    >>> args.free, args.max_effects, args.discover
+    ('R.R', 2, None)
+    >>> build_parser().parse_args(["diagnose", "m:f", "d.csv", "--no-discover"]).discover
+    False
     """
     from phs.workflows.cli_options import _positive
     from phs.workflows.cli_recordings import add_recording_options
@@ -39,6 +41,11 @@ def add_subcommand(sub) -> None:
                    help="accept at most N effects one after the other (default 2)")
     p.add_argument("--jobs", type=_positive("--jobs", integer=True), metavar="N",
                    help="processes fitting hypotheses in parallel (default: CPUs, at most 4)")
+    p.add_argument("--discover", dest="discover", action="store_true", default=None,
+                   help="always look for a passive correction outside the library (default: when the residual stays structured)")
+    p.add_argument("--no-discover", dest="discover", action="store_false", help="never look outside the library")
+    p.add_argument("--discover-out", metavar="FILE",
+                   help="write the discovered correction as Python source of a candidate class (nothing is written when none is found)")
     add_option(p, "--quiet")
     p.set_defaults(run=run_diagnose)
 
@@ -50,6 +57,10 @@ def run_diagnose(args: argparse.Namespace) -> int:
     from phs.workflows.cli_recordings import model_and_recordings
 
     _check_writable(args.json)
+    if args.discover_out is not None:
+        if args.discover is False:
+            raise InputDataError("--discover-out needs discovery: drop --no-discover")
+        _check_writable(args.discover_out)
     if args.report is not None:
         if os.path.exists(args.report) and not os.path.isdir(args.report):
             raise InputDataError(f"--report {args.report!r} exists and is not a directory")
@@ -66,12 +77,17 @@ def run_diagnose(args: argparse.Namespace) -> int:
     from phs.workflows.diagnose.report import to_json
 
     d = diagnose(system, rec, validation=val, free=free or None, outputs=outputs, candidates=candidates, x0=x0 or None,
-                 max_effects=args.max_effects, n_jobs=args.jobs, progress=not args.quiet)
+                 max_effects=args.max_effects, n_jobs=args.jobs, progress=not args.quiet, discover=args.discover)
     text = d.summary()
     document = to_json(d) if args.json else None
+    emitted = d.discovered_source() if args.discover_out is not None and d.discovery is not None and d.discovery.found else None
     print(text)
     if args.report is not None:
         d.write_report(args.report)
     if document is not None:
         write_atomic(args.json, document)
+    if emitted is not None:
+        from phs.workflows.diagnose.discover import write_source
+
+        write_source(args.discover_out, emitted)
     return 0

@@ -79,6 +79,19 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
     return " ".join(out)
 
 
+def discovery_lines(discovery) -> list[str]:
+    """Summary lines of a discovery: the chosen terms with their words, or why nothing was found."""
+    if not discovery.found:
+        return [f"  discovery ({discovery.seconds:.1f} s): nothing found ({discovery.reason})"]
+    out = [f"  discovered correction ({discovery.seconds:.1f} s), explains {100 * discovery.share:.0f} % of what the model it "
+           "extends misses:"]
+    out += [f"    {d['term']:<32} {d['parameter'].split('.', 1)[-1]} = {d['coefficient']:.4g}: {d['words']}" for d in discovery.described]
+    if discovery.similar:
+        e, c = discovery.similar[0]
+        out.append(f"    closest library effect: {e} (signature cosine {c:.2f})")
+    return out
+
+
 def failed_sentence(failed, scale: float) -> str:
     """What the explanation says of hypotheses whose fit failed (empty when none did)."""
     if not failed:
@@ -222,6 +235,8 @@ def write_report(d, directory) -> None:
             f"<h1>Diagnosis of {html.escape(d.system.name)}</h1>",
             f"<p><b>Verdict: {html.escape(d.verdict['effect'])}</b> (confidence {d.verdict['confidence']:.2f})</p>",
             f"<p>{html.escape(d.verdict['explanation'])}</p>",
+            f"<p>The named effect explains {100 * d.verdict.get('explained_share', 0.0):.0f} % of what the nominal model misses "
+            "above the noise floor.</p>",
             "<h2>Fit before and after</h2><table><tr><th>channel</th><th>nominal training</th><th>nominal validation</th>"
             "<th>final training</th><th>final validation</th></tr>"]
     for ch in d.outputs:
@@ -241,6 +256,10 @@ def write_report(d, directory) -> None:
         page.append(f"<tr><td>{html.escape(f.kind)}</td><td>{html.escape(f.channel)}</td><td>{html.escape(f.where)}</td>"
                     f"<td>{f.strength:.4g}</td><td>{html.escape(f.meaning)}</td></tr>")
     page.append("</table>")
+    if d.discovery is not None:
+        page.append("<h2>Discovered correction</h2><pre>" + html.escape("\n".join(discovery_lines(d.discovery))) + "</pre>")
+        if d.discovery.found:
+            page.append("<p>" + html.escape(d.discovery.text) + "</p>")
     failed = d.verdict.get("failed", [])
     if failed:
         page.append("<h2>Failed hypotheses (missing from the ranking)</h2><table><tr><th>hypothesis</th><th>reason</th></tr>")

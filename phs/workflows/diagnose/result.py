@@ -34,6 +34,9 @@ class Diagnosis:
     rounds: list = field(default_factory=list)
     data: object = None
     final_findings: list = field(default_factory=list)
+    discovery: object = None
+    """The correction found outside the library (:class:`~phs.workflows.diagnose.discover.Discovery`), or
+    None when discovery did not run."""
 
     @property
     def effect(self) -> str:
@@ -55,6 +58,23 @@ class Diagnosis:
     def final_system(self) -> PHSystem:
         """The final (augmented and fitted) model."""
         return self.final.system
+
+    def discovered_source(self) -> str:
+        """Python source of a :class:`~components.candidates.Candidate` subclass holding the discovered
+        correction with its fitted parameters (see :mod:`phs.workflows.diagnose.discover.emission`).
+
+        Raises
+        ------
+        PHSError
+            When no correction was discovered.
+        """
+        from phs.errors import PHSError
+        from phs.workflows.diagnose.discover import source
+
+        if self.discovery is None or not self.discovery.found:
+            raise PHSError(f"diagnosis of {self.system.name!r}: no correction was discovered"
+                           + (f" ({self.discovery.reason})" if self.discovery is not None and self.discovery.reason else ""))
+        return source(self.discovery, self.discovery.text, self.discovery.share)
 
     def structure_checks(self) -> dict:
         """Structural checks of the final model (J skew, R PSD, H bounded below, units)."""
@@ -88,6 +108,7 @@ class Diagnosis:
             "final": {"fit_percent": self.final.fit_percent, "validation_fit_percent": self.final.validation_fit_percent,
                       "parameters": {**self.final.values, **self.final.element_values},
                       "passive": self.structure_checks()["ok"]},
+            "discovered": self.discovery.to_dict() if self.discovery is not None else None,
             "seconds": self.seconds,
         }
 
@@ -95,7 +116,9 @@ class Diagnosis:
         v = self.verdict
         lines = [f"Diagnosis of {self.system.name!r} ({self.seconds:.1f} s): verdict {v['effect']}"
                  + (f" (effects: {', '.join(v['effects'])})" if len(v["effects"]) > 1 else "")
-                 + f", confidence {v['confidence']:.2f}", "  " + v["explanation"]]
+                 + f", confidence {v['confidence']:.2f}", "  " + v["explanation"],
+                 (f"  the named effect explains {100 * v.get('explained_share', 0.0):.0f} % of what the nominal model misses "
+                  "(above the noise floor)" if v["effect"] != "none" else "  no effect named (explained share 0 %)")]
         lines.append("  fit % (training / validation):")
         for ch in self.outputs:
             lines.append(f"    {ch}: nominal {self.nominal.fit_percent[ch]:.2f} / {self.nominal.validation_fit_percent[ch]:.2f}"
@@ -117,6 +140,8 @@ class Diagnosis:
                          f"gain {100 * _gain(self.nominal, h):+.1f} %" + (" (screening)" if h.stage != "full" else "")
                          + (" (no improvement: the fit ended at the nominal model)" if h.no_improvement else "")
                          + ("  accepted" if any(h is a for a in self.accepted) else ""))
+        if self.discovery is not None:
+            lines += report.discovery_lines(self.discovery)
         failed = self.verdict.get("failed", [])
         if failed:
             lines.append("  failed hypotheses (missing from the ranking):")

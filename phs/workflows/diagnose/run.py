@@ -10,8 +10,9 @@ from dataclasses import replace
 import numpy as np
 
 from phs.errors import InputDataError, ParameterError
+from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
-from phs.workflows.diagnose.ranking import _gain, _pick
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick
 from phs.workflows.diagnose.result import Diagnosis, _verdict
 from phs.workflows.diagnose.screening import _refit_friction_rival, _screen_and_refit
 
@@ -21,7 +22,7 @@ SPLIT = 0.7
 
 def diagnose(system, recording, *, validation=None, free=None, outputs=None, candidates=None, x0=None, bounds=None,
              log_scale=None, max_effects: int = 2, n_jobs: int | None = None, progress: bool = False, rtol: float = 1e-7,
-             refit_top: int = 3, estimate_x0=(), weights=None) -> Diagnosis:
+             refit_top: int = 3, estimate_x0=(), weights=None, discover: bool | None = None) -> Diagnosis:
     """Find where ``system`` and ``recording`` disagree, which physics is missing, and the fixed model.
 
     Parameters
@@ -64,6 +65,12 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         kept for every hypothesis.  A dict: fixed weights per channel.  The BIC floors every channel at
         the same share whatever the weights.  The weights used are in ``Diagnosis.weights`` and the
         report; ``docs/workflows/diagnose.md`` ("Channel weights") compares the two on the concealed cases.
+    discover : bool, optional
+        Look for a passive correction outside the library (:mod:`phs.workflows.diagnose.discover`):
+        None (default) when the final model (the nominal one when no candidate was accepted) leaves a
+        structured residual (RMS above 1.5 times the noise in some channel) or a residual that is not
+        white (Ljung-Box p < 0.01 in some channel, RMS at least 1 % of its standard deviation); True
+        always; False never.
 
     Returns
     -------
@@ -173,10 +180,42 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         pool = [c for c in cands if c.effect in promising[:6] and c.effect != pick.augmentation.effect]
         if not pool:
             break
+    found = None
     final_findings = _locate(current, current.system, data, noise) if accepted else findings
-    verdict = _verdict(nominal, accepted, all_hyps, findings, outs, [h for r in rounds for h in r if not h.ok])
-    return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, current, verdict, noise,
-                     time.perf_counter() - wall, rounds, data, final_findings)
+    if discover or (discover is None and (_structured(current, noise, outs) or _coloured(final_findings, current, data))):
+        from phs.workflows.diagnose.discover import discover as _discover
+
+        if progress:
+            print(f"diagnose {system.name}: discovering a correction outside the library", file=sys.stderr, flush=True)
+        found = _discover(current, nominal, data, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+    final = found.scored if found is not None and found.found else current
+    if final is not current:
+        final_findings = _locate(final, final.system, data, noise)
+    failed = [h for r in rounds for h in r if not h.ok]
+    verdict = _verdict(nominal, accepted, all_hyps, findings, outs, failed)
+    if found is not None:
+        from phs.workflows.diagnose.discover import amend_verdict
+
+        verdict = amend_verdict(verdict, found, FAILED_FACTOR ** len(verdict["failed"]))
+    verdict["explained_share"] = explained_share(nominal, final, data, noise)
+    return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
+                     time.perf_counter() - wall, rounds, data, final_findings, found)
+
+
+RELEVANT = 0.01
+"""A residual counts as left structure only from this share of its channel's standard deviation (RMS)."""
+
+
+def _coloured(findings, h, data) -> bool:
+    """Some channel's residual is not white (its whiteness finding is significant) and not negligible
+    (RMS at least :data:`RELEVANT` of the channel's standard deviation: a noise-free recording fitted to
+    rounding leaves a coloured but meaningless residual)."""
+    for f in findings:
+        if f.kind == "whiteness" and f.details.get("significant") and f.channel in h.residuals:
+            r = np.asarray(h.residuals[f.channel], float)
+            if float(np.sqrt(np.mean(r**2))) >= RELEVANT * (float(np.std(data.recording[f.channel])) or 1.0):
+                return True
+    return False
 
 
 def _through_element(data, h):

@@ -1,0 +1,149 @@
+"""Benchmark: discovery of physics outside the library, and what it costs.
+
+Cases:
+
+* ``novel``: each truth of ``examples/concealed_novel.py`` (fringe-field capacitance, heating leakage,
+  one-sided spring, softening stiffness) on a 20 s, 1 kHz recording with its own validation recording;
+  ``phs.diagnose`` with the whole library and ``discover=None``.  Reported per case: the verdict, the
+  validation-fit gain of the final model as a share of the truth's own gain (``recovered``), the
+  explained share, the discovered terms with their nature and state, the passivity checks, the time of the
+  whole diagnosis and of the discovery step (target: discovery adds at most 60 s).
+* ``library``: in-library cases of ``examples/concealed_effects.py`` with ``discover=None``: the verdict
+  must still name the truth (``--library all`` for every one).
+* ``silverbox``: the Silverbox recording (``../shared/data``, skipped when absent) with ``cubic_stiffness``
+  removed from the library: discovery should find a hardening conservative term on the position.
+
+    python bench/discover.py                 # novel cases at 20 s, 3 library cases, Silverbox
+    python bench/discover.py --quick         # 3 s recordings, two novel cases (smoke test)
+    python bench/discover.py --library all   # every in-library case too (long)
+    python bench/discover.py --only silverbox --data ../shared/data
+
+The last line printed is one JSON object: ``novel`` (per case), ``recovered_min_conservative``,
+``discovery_seconds_max``, ``library`` (per case: verdict, expected, correct), ``silverbox``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import numpy as np  # noqa: E402
+
+from examples.concealed_novel import NATURE, NOVEL, generate, truth_gain  # noqa: E402
+from phs.workflows.diagnose import diagnose  # noqa: E402
+from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
+
+FREE = ["k", "b", "eps"]
+LIBRARY_CASES = ["cubic_stiffness", "leakage", "offset"]
+DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data")
+
+
+def novel_case(effect: str, seconds: float, jobs) -> dict:
+    train, _ = generate(effect, seconds=seconds, seed=1)
+    val, vinfo = generate(effect, seconds=seconds, seed=2, validation=True)
+    t0 = time.perf_counter()
+    d = diagnose(electrostatic_actuator(), train, validation=val, free=FREE, n_jobs=jobs)
+    sec = time.perf_counter() - t0
+    truth = truth_gain(d.nominal.validation_rss, val, vinfo["clean"])
+    out = {"effect": effect, "nature": NATURE[effect][0], "state": NATURE[effect][1], "seconds": sec, "verdict": d.effect,
+           "effects": d.verdict["effects"], "explained_share": d.verdict["explained_share"],
+           "recovered": (d.nominal.validation_rss - d.final.validation_rss) / truth if truth > 0 else None,
+           "library_recovered": {h.augmentation.effect: (d.nominal.validation_rss - h.validation_rss) / truth for h in d.accepted},
+           "passive": d.structure_checks()["ok"], "discovery_seconds": d.discovery.seconds if d.discovery else 0.0,
+           "validation_fit": {"nominal": d.nominal.validation_fit_percent, "final": d.final.validation_fit_percent}}
+    if d.discovery is not None and d.discovery.found:
+        out["terms"] = [{k: x[k] for k in ("term", "state", "nature", "coefficient")} for x in d.discovery.described]
+        out["description"] = d.discovery.text
+    return out
+
+
+def library_case(effect: str, seconds: float, jobs) -> dict:
+    from examples.concealed_effects import NOMINAL_FREE
+    from examples.concealed_effects import generate as generate_library
+
+    train, _ = generate_library(effect, seconds=seconds, seed=1)
+    val, _ = generate_library(effect, seconds=seconds, seed=2, validation=True)
+    t0 = time.perf_counter()
+    d = diagnose(electrostatic_actuator(), train, validation=val, free=list(NOMINAL_FREE), n_jobs=jobs)
+    return {"effect": effect, "verdict": d.effect, "correct": d.effect == effect, "effects": d.verdict["effects"],
+            "discovery_ran": d.discovery is not None, "seconds": time.perf_counter() - t0}
+
+
+def silverbox(jobs, data_dir=DATA) -> dict | None:
+    from components.candidates import LIBRARY
+    from phs.workflows.recording import Recording
+    from systems.examples import mass_spring_damper
+
+    path = os.path.join(data_dir, "silverbox", "SNLS80mV.csv")
+    if not os.path.isfile(path):
+        return None
+    raw = np.genfromtxt(path, delimiter=",", skip_header=1)
+    fs = 1e7 / 2**14
+    v1, v2 = raw[:, 0] - raw[:, 0].mean(), raw[:, 1] - raw[:, 1].mean()
+    n, start = 600, 40000 - 600
+    rec = Recording.from_arrays(np.arange(n) / fs, {"F": v1[start:start + n] * 1e5, "position": v2[start:start + n]})
+    y, u = rec["position"], rec["F"]
+    A = np.column_stack([y[1:-1], y[:-2], u[1:-1], u[:-2]])
+    a1, a2, b1, b2 = np.linalg.lstsq(A, y[2:], rcond=None)[0]
+    s = np.log(np.roots([1.0, -a1, -a2])[0]) * fs
+    wn, zeta = abs(s), -s.real / abs(s)
+    k = (1 - a1 - a2) / (b1 + b2)
+    model = mass_spring_damper(m=k / wn**2, k=k, b=2 * zeta * k / wn)
+    t0 = time.perf_counter()
+    d = diagnose(model, rec, free=["m.m", "k.K", "b.b"], outputs=["position"], n_jobs=jobs,
+                 candidates=[c for c in LIBRARY if c.effect != "cubic_stiffness"])
+    out = {"seconds": time.perf_counter() - t0, "verdict": d.effect, "effects": d.verdict["effects"],
+           "explained_share": d.verdict["explained_share"], "passive": d.structure_checks()["ok"],
+           "validation_fit": {"nominal": d.nominal.validation_fit_percent, "final": d.final.validation_fit_percent}}
+    if d.discovery is not None and d.discovery.found:
+        out["terms"] = [{k: x[k] for k in ("term", "state", "nature", "coefficient")} for x in d.discovery.described]
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="3 s recordings, two novel cases, no library cases")
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--library", default=",".join(LIBRARY_CASES), help="in-library cases ('all', or none with '')")
+    ap.add_argument("--jobs", type=int, default=None)
+    ap.add_argument("--data", default=DATA, help="directory of the real recordings (default ../shared/data)")
+    ap.add_argument("--only", default="", help="comma-separated parts to run: novel, library, silverbox (default all)")
+    args = ap.parse_args(argv)
+    seconds = 3.0 if args.quick else args.seconds
+    novel = ["engaging_spring", "softening_stiffness"] if args.quick else list(NOVEL)
+    parts = set(args.only.split(",")) if args.only else {"novel", "library", "silverbox"}
+    novel = novel if "novel" in parts else []
+    results = []
+    for e in novel:
+        r = novel_case(e, seconds, args.jobs)
+        results.append(r)
+        print(f"{e:<22} {r['seconds']:6.1f} s (discovery {r['discovery_seconds']:5.1f} s)  verdict {r['verdict']:<18} "
+              f"recovered {r['recovered']:.2f}  explained {r['explained_share']:.2f}  passive {r['passive']}", flush=True)
+    library = []
+    if not args.quick and args.library and "library" in parts:
+        from examples.concealed_effects import EFFECTS
+
+        names = [e for e in EFFECTS if e != "none"] if args.library == "all" else args.library.split(",")
+        for e in names:
+            r = library_case(e, seconds, args.jobs)
+            library.append(r)
+            print(f"library {e:<20} verdict {r['verdict']:<20} {'ok' if r['correct'] else 'WRONG'}  discovery ran: {r['discovery_ran']}",
+                  flush=True)
+    sb = None if args.quick or "silverbox" not in parts else silverbox(args.jobs, args.data)
+    if sb is not None:
+        print(f"silverbox without cubic_stiffness: verdict {sb['verdict']}, terms {sb.get('terms')}", flush=True)
+    cons = [r["recovered"] for r in results if r["nature"] == "conservative" and r["recovered"] is not None]
+    print(json.dumps({"novel": results, "recovered_min_conservative": min(cons) if cons else None,
+                      "discovery_seconds_max": max([r["discovery_seconds"] for r in results], default=None), "library": library,
+                      "silverbox": sb},
+                     default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,86 @@
+"""Discovery: a passive port-Hamiltonian correction found when no library candidate explains the residual.
+
+When the library (:data:`components.candidates.LIBRARY`) leaves a structured residual,
+:func:`discover` fits a correction with port-Hamiltonian structure built in, sparse over a dictionary
+built from the model itself (:mod:`~phs.workflows.diagnose.discover.dictionary`: added energies on
+single states, added dissipation ``R ⪰ 0`` on an effort), chosen by output error
+(:mod:`~phs.workflows.diagnose.discover.selection`), names it
+(:mod:`~phs.workflows.diagnose.discover.naming`) and writes it as a candidate class the user keeps
+(:mod:`~phs.workflows.diagnose.discover.emission`).  ``docs/workflows/discover.md`` states the method,
+the dictionaries and the passivity argument.
+"""
+
+from __future__ import annotations
+
+from phs.workflows.diagnose.discover.dictionary import Discovered, Term, dictionary
+from phs.workflows.diagnose.discover.emission import source, write_source
+from phs.workflows.diagnose.discover.naming import RESEMBLES, describe, explained_share, resemblance, sentence
+from phs.workflows.diagnose.discover.selection import Discovery, select
+
+
+def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int = 1, progress: bool = False) -> Discovery:
+    """Select, fit and name a passive correction of the fitted model ``current``.
+
+    Parameters
+    ----------
+    current : Scored
+        The model to correct (the nominal fit, or the model with the accepted library effects).
+    nominal : Scored
+        The nominal fit (the library hypotheses' reference).
+    data : Data
+        The diagnosis' data.
+    noise : dict
+        Noise std per channel (:func:`~phs.workflows.diagnose.mismatch.noise_level`).
+    hypotheses : sequence of Scored
+        The fitted library hypotheses the correction is compared with.
+    n_jobs, progress
+        As for :func:`~phs.workflows.diagnose.diagnose`.
+
+    Returns
+    -------
+    Discovery
+        With ``described`` (per term), ``similar`` (library effects by signature cosine), ``share``
+        (:func:`explained_share` against ``current``) and ``text`` (one paragraph) when a correction
+        was found.
+    """
+    d = select(current, data, n_jobs=n_jobs, progress=progress)
+    if d.found:
+        d.described = describe(d.terms, d.values, current.system)
+        d.similar = resemblance(d.scored, current, nominal, hypotheses, data)
+        d.share = explained_share(current, d.scored, data, noise)
+        d.text = sentence(d.described, d.similar, d.share)
+    return d
+
+
+def amend_verdict(verdict: dict, discovery, scale: float = 1.0) -> dict:
+    """The verdict with the discovered correction: effect ``discovered`` when no library effect was
+    accepted, ``discovered`` appended to ``effects``, its paragraph appended to the explanation and
+    ``verdict["discovered"]`` (see :meth:`Discovery.to_dict`).  A verdict led by the correction has
+    confidence ``0.5 + 0.5 × explained share`` (times ``scale``, the failed hypotheses' factor).
+
+    Examples
+    --------
+    >>> v = {"effect": "none", "effects": [], "explanation": "", "confidence": 0.9, "failed": []}
+    >>> amend_verdict(v, None) is v   # nothing discovered: the verdict stands
+    True
+    """
+    if discovery is None or not discovery.found:
+        return verdict
+    out = dict(verdict)
+    if verdict["effect"] == "none":
+        out["effect"] = "discovered"
+        library = (verdict["explanation"]
+                   .replace("No missing physics found: no candidate improves the fit beyond what noise explains. The best,",
+                            "No library candidate explains it: the best,")
+                   .replace("No candidate could be fitted; the nominal model stands.", "No library candidate could be fitted."))
+        out["explanation"] = discovery.text + " " + library
+        out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)
+    else:
+        out["explanation"] = verdict["explanation"] + " " + discovery.text
+    out["effects"] = list(verdict["effects"]) + ["discovered"]
+    out["discovered"] = discovery.to_dict()
+    return out
+
+
+__all__ = ["discover", "amend_verdict", "select", "Discovery", "Discovered", "Term", "dictionary", "describe", "resemblance",
+           "explained_share", "sentence", "source", "write_source", "RESEMBLES"]

@@ -1,0 +1,161 @@
+"""A discovered correction as a component the user keeps: the Python source of a small candidate class.
+
+:func:`source` writes a module holding one :class:`components.candidates.Candidate` subclass whose
+``augment`` attaches the fitted terms (coefficients and scales as parameter defaults, with units) with
+the library's public building blocks (:func:`components.candidates.add_energy`,
+:func:`components.candidates.add_damping`), and ``FITTED``: the nominal parameters as refitted with it.
+``cls().augment(system.with_params(FITTED), where, None).system`` is the model it extends (the diagnosed
+model, with any accepted library effect attached) with the correction, and simulates as the fitted one did.
+"""
+
+from __future__ import annotations
+
+import re
+
+from phs.io import write_atomic
+from phs.workflows.diagnose.discover.dictionary import EFFECT, C, Discovered, _slug, shape
+
+_FUNCTIONS = ("cosh", "exp", "log", "sqrt")
+
+
+def _class_name(system_name: str) -> str:
+    return "Discovered" + "".join(w.capitalize() for w in re.split(r"[^0-9A-Za-z]+", system_name) if w)
+
+
+def _param(p, indent: str) -> str:
+    rng = f", ({p.range[0]!r}, {p.range[1]!r})" if p.range is not None else ""
+    return f"{indent}Param({p.name!r}, {p.value!r}, {p.unit!r}, {p.description!r}{rng}, positive={bool(p.positive)}),"
+
+
+def source(discovery, description: str = "", share: float | None = None) -> str:
+    """Python source of a candidate class reproducing ``discovery``'s fitted correction.
+
+    Parameters
+    ----------
+    discovery : Discovery
+        A discovery that found a correction.
+    description : str
+        Its description in words (the class docstring).
+    share : float, optional
+        The share of the residual it explains (stated in the docstring).
+
+    Returns
+    -------
+    str
+    """
+    h = discovery.scored
+    base = discovery.base.system
+    terms = list(discovery.terms)
+    cand = Discovered(terms, discovery.values)
+    thetas = cand.params()
+    scales = {}
+    for t in terms:
+        for p in t.scales(base):
+            scales.setdefault(p.name, p)
+    name = _class_name(base.name)
+    fitted = {k: float(v) for k, v in h.values.items() if k in base.param_names}
+    body = []
+    for k, t in enumerate(terms):
+        expr = shape(t).subs({C: t.c}) if t.shape.startswith("engage") else shape(t)
+        new = f"[theta[{k}]]" + (" + scale" if k == 0 else "")
+        sym = {key: repr(f"{EFFECT}.{_slug(n)}_{key}") for key, n in (("scale", t.state), ("energy", t.state), ("effort", t.state),
+                                                                         ("damping", t.state), ("via", t.via))}
+        sym["via"] = repr(f"{EFFECT}.{_slug(t.via)}_scale")
+        body.append(f"        # {t.label}: {'an added energy' if t.kind == 'energy' else 'an added dissipation R >= 0'}")
+        if t.kind == "energy":
+            body.append(f"        z = state({t.state!r}) / S[{sym['scale']}]")
+        else:
+            body.append(f"        e = s.grad_H[s.state_names.index({t.state!r})] / S[{sym['effort']}]")
+        if t.via:
+            body.append(f"        x = state({t.via!r}) / S[{sym['via']}]")
+        if t.kind == "energy":
+            body.append(f"        term = theta[{k}].symbol * S[{sym['energy']}] * ({expr})")
+            body.append(f"        s = add_energy(s, {f'{EFFECT}@{t.label}'!r}, term, {new}, self.effect)")
+        else:
+            body.append(f"        term = theta[{k}].symbol * S[{sym['damping']}] * ({expr})")
+            body.append(f"        s = add_damping(s, {t.state!r}, term, {new}, {f'{EFFECT}.{k}'!r})")
+    text = "\n".join(body)
+    used = [f for f in _FUNCTIONS if re.search(rf"\b{f}\(", text)]
+    neutral = {p.name: (0.0 if not p.positive else p.range[0]) for p in thetas}
+    lines = [
+        f'"""{name}: a correction of {base.name!r} discovered by diagnosis.',
+        "",
+        *_wrap(description or "A passive correction found by sparse regression over the model's own states."),
+        "",
+        "Terms (coefficients in units of the state's scale along the fit):",
+        "",
+        *[f"* ``{t.label}`` ({t.kind}): {p.name} = {p.value:.6g}" for t, p in zip(terms, thetas, strict=True)],
+        "",
+        *([f"It explains {100 * share:.0f} % of what the model it extends misses above the noise floor.", ""] if share is not None else []),
+        "``FITTED`` holds the parameters of the model it extends (the diagnosed model with any accepted library effect)",
+        "as refitted with it; that model with the correction is",
+        f"``{name}().augment(system.with_params(FITTED), {terms[0].state!r}, None).system``.",
+        '"""',
+        "",
+        "from __future__ import annotations",
+        "",
+        *([f"from sympy import {', '.join(used)}", ""] if used else []),
+        "from components.candidates import Augmentation, Candidate, add_damping, add_energy",
+        "from phs import Param",
+        "",
+        f"FITTED = {fitted!r}",
+        '"""The diagnosed model\'s parameters as refitted together with the correction."""',
+        "",
+        "",
+        f"class {name}(Candidate):",
+        f'    """{_first_sentence(description)}"""',
+        "",
+        f"    effect = {EFFECT!r}",
+        f"    summary = {_first_sentence(description)!r}",
+        '    kind = "structure"',
+        "",
+        "    def attach_points(self, system):",
+        f"        return [{terms[0].state!r}]",
+        "",
+        "    def augment(self, system, where, scales=None):",
+        "        self._check_where(system, where)",
+        "        scale = [",
+        *[_param(p, "            ") for p in scales.values()],
+        "        ]",
+        "        theta = [",
+        *[_param(p, "            ") for p in thetas],
+        "        ]",
+        "        S = {p.name: p.symbol for p in scale}",
+        "",
+        "        def state(name):",
+        "            return system.states[system.state_names.index(name)].symbol",
+        "",
+        "        s = system",
+        text,
+        f"        return Augmentation(self.effect, where, {' + '.join(t.label for t in terms)!r}, s, [p.name for p in theta],",
+        f"                            {{p.name: p.range for p in theta}}, [], neutral={neutral!r})",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _wrap(text: str, width: int = 100) -> list[str]:
+    import textwrap
+
+    return textwrap.wrap(text, width) or [""]
+
+
+def _first_sentence(text: str) -> str:
+    head = (text or "A discovered passive correction.").split("; ")[0].split(". ")[0].rstrip(".")
+    return (head + ".").replace('"""', "'''")
+
+
+def write_source(path, text: str) -> None:
+    """Write emitted source to ``path`` atomically (after checking that it compiles).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     write_source(os.path.join(d, "c.py"), "X = 1")
+    ...     open(os.path.join(d, "c.py")).read()
+    'X = 1'
+    """
+    compile(text, str(path), "exec")
+    write_atomic(path, text)
+

@@ -1,0 +1,284 @@
+"""Choosing a sparse passive correction: screen the dictionary, add terms forward by BIC, refit jointly.
+
+Every decision is taken on the output-error fit of the model, never on differentiated data:
+
+1. **screen**: one simulation of the current model with every remaining term at zero and one per term
+   with its coefficient nudged give each term's output sensitivity; with the sensitivities of the
+   nominal free parameters projected out, ``(jᵀr)² / jᵀj`` is the share of the training residual the
+   term could remove on its own (to first order); a nonnegative term whose best coefficient is
+   negative is dropped;
+2. **forward selection**: the most promising terms are each fitted by output error together with the
+   terms chosen so far and the nominal free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`,
+   loosely); the best by BIC joins when it lowers BIC by :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`,
+   lowers the validation residual by :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` and its
+   model passes the structural checks (H bounded below on the declared box, R ⪰ 0);
+3. **refit**: the chosen terms and the nominal free parameters to convergence, never ending worse than
+   the model before it.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from phs.workflows.diagnose.discover.dictionary import Discovered, Term, dictionary
+
+SCREEN_TOP = 3
+"""Terms fitted by output error at each forward step (the best screened ones)."""
+MAX_TERMS = 3
+"""Most terms a discovered correction holds."""
+MAX_SAMPLES = 5000
+"""Training samples the forward selection fits on (the first ones; the chosen terms are then refitted on
+the whole recording)."""
+NEGLIGIBLE = 1e-6
+"""A coefficient at most this large (in units of its state's scale) after the joint refit: the term is dropped."""
+NUDGE = 0.02
+"""Coefficient used to measure a term's output sensitivity (the terms are scaled so 1 is a typical size)."""
+
+
+@dataclass
+class Discovery:
+    """Outcome of :func:`select`: the fitted correction (``scored``, None when nothing was found), its
+    ``terms``, the model it extends (``base``), the forward ``steps`` (label, ΔBIC, validation gain,
+    accepted) and the screening table (``screened``: label, first-order share)."""
+
+    base: object
+    scored: object = None
+    terms: tuple = ()
+    steps: list = field(default_factory=list)
+    screened: list = field(default_factory=list)
+    seconds: float = 0.0
+    reason: str = ""
+    described: list = field(default_factory=list)
+    similar: list = field(default_factory=list)
+    share: float = 0.0
+    text: str = ""
+
+    @property
+    def found(self) -> bool:
+        return self.scored is not None and bool(self.terms)
+
+    def to_dict(self) -> dict:
+        """The documented JSON of a discovery: ``found``, ``terms`` (per term: ``term``, ``state``,
+        ``nature``, ``parameter``, ``coefficient``, ``words``), ``parameters`` (the fitted coefficients
+        and the refitted nominal values), ``description``, ``explained_share``, ``resembles`` (library
+        effect and signature cosine, best first), ``validation_fit_percent``, ``steps``, ``screened``
+        (the ten best screened terms), ``seconds``, ``reason`` (why nothing was found)."""
+        out = {"found": self.found, "seconds": self.seconds, "steps": self.steps,
+               "screened": [{"term": lab, "share": g} for lab, g in self.screened[:10]]}
+        if not self.found:
+            return {**out, "reason": self.reason}
+        return {**out, "terms": self.described, "parameters": dict(self.scored.values), "description": self.text,
+                "explained_share": self.share, "resembles": [{"effect": e, "cosine": c} for e, c in self.similar],
+                "validation_fit_percent": self.scored.validation_fit_percent, "fit_percent": self.scored.fit_percent}
+
+    @property
+    def values(self) -> dict:
+        """Fitted coefficients by parameter name."""
+        return {t.parameter: float(self.scored.values[t.parameter]) for t in self.terms} if self.found else {}
+
+
+def _trajectory(h, data):
+    from phs.workflows.diagnose.hypotheses import train_result
+
+    res = train_result(h, data)
+    return res, {n: np.asarray(res[n], float) for n in h.system.state_names}
+
+
+def _scales(h, data, res):
+    from components.candidates import Scales
+
+    X = np.asarray(res.x)
+    names = h.system.input_names
+    U = np.column_stack([np.asarray(res[n]) for n in names]) if names else np.zeros((len(X), 0))
+    return Scales.of(h.system, res.t, X, U, {ch: data.recording[ch] for ch in data.outputs})
+
+
+def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float, float]]:
+    """First-order share of the training residual each of ``terms`` could remove next to ``chosen``
+    and the nominal free parameters, best first (terms that cannot help are left out).
+
+    Parameters
+    ----------
+    current : Scored
+        The model the terms would extend (holding ``chosen`` at their fitted values).
+    chosen, terms : sequence of Term
+    data : Data
+    base_system : PHSystem
+        The fitted model without any discovered term.
+
+    Returns
+    -------
+    list of (Term, float, float)
+        Each term with its first-order share and its first-order best coefficient (a fit's start).
+    """
+    from codegen import Simulator
+    from phs.errors import PHSError
+    from phs.workflows.diagnose.hypotheses import _simulate
+
+    start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+    cand = Discovered(list(chosen) + list(terms), start)
+    system = cand.apply(base_system)
+    sim = Simulator(system, energy=False)
+    p0 = {p.name: p.value for p in cand.params()}
+    rec = data.recording
+    scale = {ch: float(np.std(rec[ch])) or 1.0 for ch in data.outputs}
+
+    def outputs(over):
+        r = _simulate(system, rec, current.x0, params={**p0, **over}, sim=sim)
+        return np.concatenate([np.asarray(r[ch], float) / scale[ch] for ch in data.outputs])
+
+    y0 = outputs({})
+    r = np.concatenate([np.asarray(rec[ch], float) / scale[ch] for ch in data.outputs]) - y0
+    cols = []
+    for k in data.free:
+        v = float(current.values.get(k, system.param(k).value))
+        dv = 1e-3 * (abs(v) or 1.0)
+        cols.append((outputs({k: v + dv}) - y0) / dv)
+    A = np.column_stack(cols) if cols else np.zeros((len(y0), 0))
+    Qa = np.linalg.qr(A)[0] if cols else A
+    out = []
+    rr = float(r @ r) or 1.0
+    for t in terms:
+        try:
+            j = (outputs({t.parameter: p0[t.parameter] + NUDGE}) - y0) / NUDGE
+        except (PHSError, RuntimeError):
+            continue
+        if not np.all(np.isfinite(j)):
+            continue
+        jp = j - Qa @ (Qa.T @ j) if cols else j
+        jj = float(jp @ jp)
+        if jj <= 1e-30 * len(jp):
+            continue
+        coef = float(jp @ r) / jj
+        if not t.signed and coef <= 0:
+            continue
+        out.append((t, float(jp @ r) ** 2 / jj / rr, coef))
+    out.sort(key=lambda tg: -tg[1])
+    return out
+
+
+def _window(data, base):
+    """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples (the forward
+    selection's fits; validation scores stay on the whole validation recording); ``data`` itself when
+    short enough or when ``base`` ends in an input element (its transformed input belongs to the whole)."""
+    from dataclasses import replace
+
+    rec = data.recording
+    aug = base.augmentation
+    if len(rec) <= MAX_SAMPLES or (aug is not None and aug.element is not None) or data.train_mask is not None:
+        return data
+    return replace(data, recording=rec.window(rec.t[0], rec.t[MAX_SAMPLES - 1]))
+
+
+def _rescore(h, data):
+    """``h`` (its fitted system and values) scored on ``data``."""
+    from phs.workflows.diagnose.hypotheses import score
+
+    out = score(h.label, h.system, h.values, h.x0, h.n_params, data, augmentation=h.augmentation)
+    out.stage = h.stage
+    return out
+
+
+def _refit(current, chosen, base, data, progress, joint=True):
+    """``chosen`` refitted to convergence with the nominal free parameters, from ``current``'s values;
+    ``current`` itself when the refit does not end better or fails the structural checks."""
+    from phs.workflows.diagnose.screening import _run_all
+
+    start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+    aug = Discovered(chosen, start).augment(base.system, chosen[0].state, None)
+    full = _run_all(current, [aug], data, 1, progress, "discover refit", joint=joint)[0]
+    return full if full.ok and not full.no_improvement and full.rss <= current.rss and _passes(full) else current
+
+
+def _passes(h) -> bool:
+    try:
+        return bool(h.system.check().ok)
+    except Exception:  # a check that cannot run does not pass
+        return False
+
+
+def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: int = MAX_TERMS, top: int = SCREEN_TOP) -> Discovery:
+    """A sparse passive correction of the fitted model ``base`` (a :class:`~phs.workflows.diagnose.hypotheses.Scored`).
+
+    Parameters
+    ----------
+    base : Scored
+        The fitted model to correct (the nominal model or the one with the accepted library effects).
+    data : Data
+        The diagnosis' data (its ``free`` parameters are refitted with the correction).
+    n_jobs : int
+        Processes fitting the terms of a forward step in parallel.
+    progress : bool
+        One line per step on stderr.
+    max_terms, top : int
+        Most terms chosen; terms fitted by output error at each step.
+
+    Returns
+    -------
+    Discovery
+    """
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+    from phs.workflows.diagnose.screening import _run_all
+
+    wall = time.perf_counter()
+    res, traj = _trajectory(base, data)
+    terms = dictionary(base.system, _scales(base, data, res), traj)
+    out = Discovery(base)
+    full_data, data = data, _window(data, base)
+    current, chosen = (base if data is full_data else _rescore(base, data)), []
+    for step in range(max_terms):
+        ranked = screen(current, chosen, [t for t in terms if t not in chosen], data, base.system)
+        if step == 0:
+            out.screened = [(t.label, g) for t, g, _ in ranked]
+        if not ranked:
+            break
+        start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+        # each fit starts from the chosen terms' values and the new term's first-order coefficient (a
+        # coefficient starting at exactly zero gives the solver no scale to move it by)
+        augs = [Discovered(chosen + [t], {**start, t.parameter: float(np.clip(c, -1.0, 1.0))}).augment(
+            base.system, (chosen or [t])[0].state, None) for t, _, c in ranked[:top]]
+        hyps = _run_all(current, augs, data, n_jobs, progress, f"discover step {step + 1}", joint=False)
+        ok = sorted([h for h in hyps if h.ok and not h.no_improvement], key=lambda h: h.bic)
+        taken = None
+        for h in ok:
+            dbic = h.bic - current.bic
+            gain = (current.validation_rss - h.validation_rss) / current.validation_rss if current.validation_rss > 0 else 0.0
+            accept = -dbic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and _passes(h)
+            out.steps.append({"term": h.augmentation.component.split(" + ")[-1], "delta_bic": float(dbic), "validation_gain": float(gain),
+                              "accepted": bool(accept)})
+            if accept:
+                taken = h
+                break
+        if taken is None:
+            break
+        chosen = [t for t in terms if t.label in taken.augmentation.component.split(" + ")]
+        current = taken
+        if progress:
+            print(f"  discover: chose {', '.join(t.label for t in chosen)}", file=sys.stderr, flush=True)
+    if chosen:  # the chosen terms refitted on the whole training recording
+        short = data is not full_data
+        data = full_data
+        final = _refit(_rescore(current, data) if short else current, chosen, base, data, progress, joint=not short)
+        kept = [t for t in chosen if abs(final.values[t.parameter]) > NEGLIGIBLE]
+        if kept and len(kept) < len(chosen):  # a term the joint refit drove to zero is dropped, and the rest refitted
+            pruned = _refit(final, kept, base, data, progress, joint=not short)
+            if pruned.bic <= final.bic + MIN_BIC_GAIN:
+                final, chosen = pruned, kept
+        gain = (base.validation_rss - final.validation_rss) / base.validation_rss if base.validation_rss > 0 else 0.0
+        if short and not (base.bic - final.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN):
+            chosen = []
+            out.reason = "the terms chosen on a window of the training recording did not hold on the whole of it"
+    if chosen:
+        final.stage = "full"
+        final.reference_rss, final.reference_bic = base.validation_rss, base.bic
+        final.label = f"discovered@{chosen[0].state}"
+        out.scored, out.terms = final, tuple(chosen)
+    else:
+        out.reason = "no dictionary term lowered BIC and the validation residual enough" if out.steps or out.screened else \
+            "no dictionary term could change the outputs"
+    out.seconds = time.perf_counter() - wall
+    return out

@@ -1,0 +1,192 @@
+"""Discovery finds passive corrections the library cannot express, names them and emits them as components.
+
+The recordings come from ``examples/concealed_novel.py``: the electrostatic actuator with a fringe-field
+capacitance, a leakage that heats, a one-sided spring engaging part-way through the stroke, or a stiffness
+softening exponentially with stroke.  Fast tests run the discovery step alone on a short recording; the
+whole diagnosis of every case (library and discovery) and the in-library cases run with ``-m slow``
+(and ``bench/discover.py``); Silverbox without the cubic stiffness is in ``test_diagnose_real.py``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+import numpy as np
+import pytest
+
+from examples.concealed_novel import NOVEL, generate, truth_gain
+from phs.errors import InputDataError, PHSError
+from phs.workflows.cli import main
+from phs.workflows.diagnose import diagnose, noise_level
+from phs.workflows.diagnose.discover import Discovered, dictionary, discover, source
+from phs.workflows.diagnose.hypotheses import Data, _simulate
+from phs.workflows.diagnose.nominal import fit_nominal
+from systems.electrostatic_actuator import electrostatic_actuator
+
+FREE = ["k", "b", "eps"]
+
+
+def _data(effect, seconds):
+    train, info = generate(effect, seconds=seconds, seed=1)
+    val, vinfo = generate(effect, seconds=seconds, seed=2, validation=True)
+    return Data(train, val, np.ones(len(val), bool), None, ["position", "current"], FREE, {}, [], None), info, vinfo
+
+
+@pytest.fixture(scope="module")
+def softening():
+    """Discovery alone on the softening-stiffness case (2 s recordings)."""
+    data, info, vinfo = _data("softening_stiffness", 2.0)
+    nominal, data = fit_nominal(electrostatic_actuator(), data)
+    noise = {ch: noise_level(data.recording[ch]) for ch in data.outputs}
+    return discover(nominal, nominal, data, noise, n_jobs=1), nominal, data, info, vinfo
+
+
+def test_every_dictionary_term_is_passive_at_its_bounds():
+    from components.candidates import Scales
+
+    s = electrostatic_actuator()
+    terms = dictionary(s, Scales.of(s))
+    assert {t.kind for t in terms} == {"energy", "damping"} and len(terms) > 15
+    for t in terms:
+        # nonnegative terms (growing energies, every dissipation) at their largest coefficient; signed
+        # energies at a typical one of either sign (the fit keeps them only where H stays bounded below)
+        for theta in ((-1.0, 1.0) if t.signed else (t.bounds()[1],)):
+            aug = Discovered([t]).augment(s, t.state, None)
+            report = aug.system.with_params({t.parameter: theta}).check(samples=50)
+            assert report.ok, (t.label, theta, str(report))
+
+
+def test_discovery_recovers_a_softening_stiffness(softening):
+    d, nominal, data, info, vinfo = softening
+    assert d.found, d.reason
+    gain = nominal.validation_rss - d.scored.validation_rss
+    assert gain >= 0.7 * truth_gain(nominal.validation_rss, data.validation, vinfo["clean"])
+    # conservative, on the displacement, and passive
+    assert {x["state"] for x in d.described} == {info["state"]}
+    assert {x["nature"] for x in d.described} == {info["nature"]}
+    assert d.scored.system.check().ok
+    assert 0.7 <= d.share <= 1.0
+    assert "conservative" in d.text and "x" in d.text
+    json.dumps(d.to_dict())
+
+
+def test_emitted_source_imports_and_reproduces_the_fitted_model(softening, tmp_path):
+    d, nominal, data, _, _ = softening
+    path = tmp_path / "discovered_actuator.py"
+    path.write_text(source(d, d.text, d.share))
+    spec = importlib.util.spec_from_file_location("discovered_actuator", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cls = next(v for k, v in vars(mod).items() if k.startswith("Discovered") and isinstance(v, type))
+    s = electrostatic_actuator().with_params(mod.FITTED)
+    aug = cls().augment(s, cls().attach_points(s)[0], None)
+    assert aug.system.check().ok and aug.free == [t.parameter for t in d.terms]
+    sim = _simulate(aug.system, data.validation, d.scored.x0)
+    for ch in data.outputs:
+        ref = np.asarray(d.scored.simulated["validation"][ch])
+        assert np.max(np.abs(np.asarray(sim[ch]) - ref)) <= 1e-6 * np.max(np.abs(ref)), ch
+
+
+def test_discovery_does_not_run_when_a_library_effect_explains_the_residual():
+    from codegen import simulate
+    from components.candidates import Leakage, Offset
+    from phs.workflows.recording import Recording
+    from systems.examples import rc_circuit
+
+    t = np.linspace(0, 0.02, 401)
+    u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
+    y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+    rec = Recording.from_arrays(t, {"U": u, "v_C": y})
+    library = [Leakage(), Offset()]
+    d = diagnose(rc_circuit(), rec, free=["R.R"], n_jobs=1, candidates=library)
+    assert d.effect == "offset" and d.discovery is None
+    assert d.verdict["explained_share"] == pytest.approx(1.0, abs=0.02)
+    assert d.to_dict()["discovered"] is None
+    with pytest.raises(PHSError, match="no correction was discovered"):
+        d.discovered_source()
+    forced = diagnose(rc_circuit(), rec, free=["R.R"], n_jobs=1, candidates=library, discover=True)
+    assert forced.effect == "offset" and forced.discovery is not None
+
+
+def test_command_line_discover_flags(tmp_path):
+    from phs.workflows.cli import build_parser
+
+    args = build_parser().parse_args(["diagnose", "m:f", "d.csv", "--discover", "--discover-out", "x.py"])
+    assert args.discover is True and args.discover_out == "x.py"
+    out = tmp_path / "x.py"
+    with pytest.raises(InputDataError, match="--no-discover"):
+        from phs.workflows.diagnose.cli import run_diagnose
+
+        run_diagnose(build_parser().parse_args(["diagnose", "m:f", "d.csv", "--no-discover", "--discover-out", str(out)]))
+    assert not out.exists()
+
+
+def test_command_line_writes_the_discovered_component(tmp_path):
+    """``phs diagnose --discover-out``: a hardening spring outside a library holding only an offset."""
+    from codegen import simulate
+    from components.candidates import add_energy
+    from systems.examples import mass_spring_damper
+
+    msd = mass_spring_damper()
+    q = msd.states[msd.state_names.index("k.l")].symbol
+    truth = add_energy(msd, "stiffening", 2.0 * q**4 / 4, [], "stiffening")
+    t = np.linspace(0.0, 12.0, 601)
+    F = 3.0 * np.sin(2 * np.pi * 0.4 * t) * np.minimum(t / 4.0, 1.0)
+    y = simulate(truth, t, u={"F": F})["position"] + 0.005 * np.random.default_rng(0).standard_normal(t.size)
+    csv = tmp_path / "run.csv"
+    np.savetxt(csv, np.column_stack([t, F, y]), delimiter=",", header="t,F,position", comments="")
+    out, js = tmp_path / "correction.py", tmp_path / "d.json"
+    assert main(["diagnose", "systems.examples:mass_spring_damper", str(csv), "--free", "k.K,b.b", "--effects", "offset",
+                 "--discover-out", str(out), "--json", str(js), "--report", str(tmp_path / "report"), "--jobs", "1", "--quiet"]) == 0
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert "Discovered correction" in page and "of what the nominal model misses" in page
+    doc = json.loads(js.read_text())
+    assert doc["verdict"]["effect"] == "discovered" and doc["discovered"]["terms"][0]["state"] == "k.l"
+    assert doc["verdict"]["explained_share"] > 0.9
+    spec = importlib.util.spec_from_file_location("correction", out)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cls = next(v for k, v in vars(mod).items() if k.startswith("Discovered") and isinstance(v, type))
+    aug = cls().augment(mass_spring_damper().with_params(mod.FITTED), "k.l", None)
+    assert aug.system.check().ok
+
+
+# -- slow: whole diagnoses ----------------------------------------------------------------------------------------------
+_HEATING = pytest.param("heating_resistance", marks=pytest.mark.xfail(
+    reason="the library's sensor offset on the current takes 47 % of the truth's gain (20 s run) and no single-state "
+           "term holds the leakage's thermal memory", strict=False))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", [e if e != "heating_resistance" else _HEATING for e in NOVEL])
+def test_diagnosis_of_novel_effects(effect):
+    data, info, vinfo = _data(effect, 3.0)
+    d = diagnose(electrostatic_actuator(), data.recording, validation=data.validation, free=FREE)
+    truth = truth_gain(d.nominal.validation_rss, data.validation, vinfo["clean"])
+    for h in d.accepted:  # a library effect is named only when its fit reaches most of the truth's gain
+        assert d.nominal.validation_rss - h.validation_rss >= 0.5 * truth, d.summary()
+    assert d.structure_checks()["ok"]
+    gain = d.nominal.validation_rss - d.final.validation_rss
+    if info["nature"] == "conservative":
+        assert gain >= 0.7 * truth, d.summary()
+    if not d.accepted:  # then discovery names it
+        assert d.effect == "discovered", d.summary()
+        assert info["state"] in {x["state"] for x in d.discovery.described}
+        assert info["nature"] in {x["nature"] for x in d.discovery.described}
+    doc = json.loads(json.dumps(d.to_dict(), default=str))
+    assert 0.0 <= doc["verdict"]["explained_share"] <= 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect", ["cubic_stiffness", "leakage", "offset"])
+def test_in_library_verdicts_stand(effect):
+    from examples.concealed_effects import NOMINAL_FREE
+    from examples.concealed_effects import generate as generate_library
+
+    train, _ = generate_library(effect, seconds=3.0, seed=1)
+    val, _ = generate_library(effect, seconds=3.0, seed=2, validation=True)
+    d = diagnose(electrostatic_actuator(), train, validation=val, free=list(NOMINAL_FREE))
+    assert d.effect == effect, d.summary()
+    assert d.discovery is None or d.verdict["effects"][0] == effect
+
