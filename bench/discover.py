@@ -76,6 +76,7 @@ def library_case(effect: str, seconds: float, jobs) -> dict:
 
 def silverbox(jobs, data_dir=DATA) -> dict | None:
     from components.candidates import LIBRARY
+    from phs.workflows.identify.starts import second_order_start
     from phs.workflows.recording import Recording
     from systems.examples import mass_spring_damper
 
@@ -87,13 +88,8 @@ def silverbox(jobs, data_dir=DATA) -> dict | None:
     v1, v2 = raw[:, 0] - raw[:, 0].mean(), raw[:, 1] - raw[:, 1].mean()
     n, start = 600, 40000 - 600
     rec = Recording.from_arrays(np.arange(n) / fs, {"F": v1[start:start + n] * 1e5, "position": v2[start:start + n]})
-    y, u = rec["position"], rec["F"]
-    A = np.column_stack([y[1:-1], y[:-2], u[1:-1], u[:-2]])
-    a1, a2, b1, b2 = np.linalg.lstsq(A, y[2:], rcond=None)[0]
-    s = np.log(np.roots([1.0, -a1, -a2])[0]) * fs
-    wn, zeta = abs(s), -s.real / abs(s)
-    k = (1 - a1 - a2) / (b1 + b2)
-    model = mass_spring_damper(m=k / wn**2, k=k, b=2 * zeta * k / wn)
+    st = second_order_start(rec["position"], rec["F"], fs)
+    model = mass_spring_damper(m=st["m"], k=st["k"], b=st["b"])
     t0 = time.perf_counter()
     d = diagnose(model, rec, free=["m.m", "k.K", "b.b"], outputs=["position"], n_jobs=jobs,
                  candidates=[c for c in LIBRARY if c.effect != "cubic_stiffness"])

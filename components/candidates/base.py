@@ -382,7 +382,7 @@ def add_damping(system, state: str, coefficient: sp.Expr, params, effect: str) -
     return _add_damping(system, system.state_names.index(state), coefficient, f"{effect}@{state}", params, effect)
 
 
-def add_energy(system, label: str, energy: sp.Expr, params, effect: str):
+def add_energy(system: PHSystem, label: str, energy: sp.Expr, params, effect: str) -> PHSystem:
     """``system`` with the energy term ``energy`` (an expression of the states and parameters, labelled
     ``label``) added to its Hamiltonian; ``params`` are the new parameters it uses.  The forces come
     from its gradient through the system's own ``J``: the building block of candidates that add a

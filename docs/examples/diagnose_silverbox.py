@@ -29,6 +29,7 @@ if not os.path.isfile(DATA):
 
 from phs.workflows.diagnose import diagnose  # noqa: E402
 from phs.workflows.diagnose.report import write_figures  # noqa: E402
+from phs.workflows.identify.starts import second_order_start  # noqa: E402
 from phs.workflows.recording import Recording  # noqa: E402
 from systems.examples import mass_spring_damper  # noqa: E402
 
@@ -47,13 +48,8 @@ rec = Recording.from_arrays(t, {"F": v1[start:start + n] * FORCE_PER_VOLT, "posi
                             source="SNLS80mV arrow", units={"F": "N", "position": "m"})
 
 # %% Start values from a second-order ARX fit (as in identify_silverbox.py)
-y, u = rec["position"], rec["F"]
-A = np.column_stack([y[1:-1], y[:-2], u[1:-1], u[:-2]])
-a1, a2, b1, b2 = np.linalg.lstsq(A, y[2:], rcond=None)[0]
-s_pole = np.log(np.roots([1.0, -a1, -a2])[0]) * FS
-wn, zeta = abs(s_pole), -s_pole.real / abs(s_pole)
-k0 = (1 - a1 - a2) / (b1 + b2)
-model = mass_spring_damper(m=k0 / wn**2, k=k0, b=2 * zeta * k0 / wn)
+start = second_order_start(rec["position"], rec["F"], FS)
+model = mass_spring_damper(m=start["m"], k=start["k"], b=start["b"])
 
 # %% Diagnose (the first 70 % of the window trains, the last 30 % validates)
 wall = time.perf_counter()

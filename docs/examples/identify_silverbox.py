@@ -33,6 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from codegen import simulator  # noqa: E402
 from phs.workflows.identify import identify, nrmse_fit  # noqa: E402
+from phs.workflows.identify.starts import second_order_start  # noqa: E402
 from phs.workflows.recording import Recording  # noqa: E402
 from systems.examples import mass_spring_damper  # noqa: E402
 
@@ -59,14 +60,9 @@ def recording(sl, name):
 rec_est = recording(slice(40650, 40650 + (300 if args.quick else 1500)), "SNLS80mV multisine")
 
 # %% Start values from a second-order ARX least-squares fit of the estimation window
-y, u = rec_est["position"], rec_est["F"]
-A = np.column_stack([y[1:-1], y[:-2], u[1:-1], u[:-2]])
-a1, a2, b1, b2 = np.linalg.lstsq(A, y[2:], rcond=None)[0]
-s_pole = np.log(np.roots([1.0, -a1, -a2])[0]) * FS
-wn, zeta = abs(s_pole), -s_pole.real / abs(s_pole)
-k0 = (1 - a1 - a2) / (b1 + b2)  # static stiffness F/x
-m0, b0 = k0 / wn**2, 2 * zeta * k0 / wn
-print(f"ARX start: f_n = {wn / 2 / np.pi:.2f} Hz, zeta = {zeta:.4f}, k = {k0:.4g} N/m, m = {m0:.4g} kg, b = {b0:.4g}")
+start = second_order_start(rec_est["position"], rec_est["F"], FS)
+k0, m0, b0 = start["k"], start["m"], start["b"]  # k: static stiffness F/x
+print(f"ARX start: f_n = {start['f_n']:.2f} Hz, zeta = {start['zeta']:.4f}, k = {k0:.4g} N/m, m = {m0:.4g} kg, b = {b0:.4g}")
 
 # %% Output-error fit of m, k, b (and the initial state) of the linear mass-spring-damper
 model = mass_spring_damper(m=m0, k=k0, b=b0)

@@ -50,6 +50,7 @@ from components.candidates import (
 )
 from components.candidates.base import _add_damping, _rebuild, _unit_of
 from phs.params import Param
+from phs.system import PHSystem
 
 EFFECT = "discovered"
 THETA_MAX = 30.0
@@ -280,7 +281,7 @@ class Discovered(Candidate):
                              (lo, hi), positive=lo > 0))
         return out
 
-    def apply(self, system):
+    def apply(self, system: PHSystem) -> PHSystem:
         """``system`` with every term attached (coefficients at their start values, scales fixed)."""
         params = self.params()
         scale = {}
