@@ -20,7 +20,9 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from codegen.idapbc import certificates, closed_loop, export
+import codegen.idapbc.certificates as certificates
+import codegen.idapbc.closed_loop as closed_loop
+import codegen.idapbc.export as export
 from codegen.idapbc.law import functions
 from codegen.idapbc.leaf import Leaf
 from codegen.idapbc.linear import integral_gain

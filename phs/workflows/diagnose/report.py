@@ -160,7 +160,7 @@ def figure_hypotheses(d) -> bytes:
 
 
 def figure_locate(d) -> bytes | None:
-    from phs.workflows.diagnose import locate as loc
+    import phs.workflows.diagnose.locate as loc
 
     if not hasattr(loc, "plot_findings"):
         return None

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from phs.workflows.diagnose import report
+import phs.workflows.diagnose.report as report
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain, calibrated
 
 if TYPE_CHECKING:
