@@ -105,6 +105,12 @@ def _simulate(system, rec: Recording, x0, params=None, sim=None):
     return sim.run(rec.t, u=u, x0=x0, params=params)
 
 
+def weight_squared(weights, ch: str, y) -> float:
+    """The squared weight of channel ``ch`` in every residual sum: ``weights[ch]²`` for a dict of weights,
+    else ``1 / var(y)`` of the measured channel ``y`` (1 for a constant channel)."""
+    return weights[ch] ** 2 if isinstance(weights, dict) else 1.0 / (float(np.var(np.asarray(y, float))) or 1.0)
+
+
 def _channel_rss(rec: Recording, sims: dict, outputs, mask=None, weights=None) -> tuple[float, dict]:
     """Weighted total residual (``Σ_ch w_ch² RSS_ch``; without a dict of weights ``w_ch = 1 / std`` of the
     channel) and the per-channel residual sums of squares."""
@@ -114,8 +120,7 @@ def _channel_rss(rec: Recording, sims: dict, outputs, mask=None, weights=None) -
         if mask is not None:
             y, yh = y[mask], yh[mask]
         per[ch] = float(np.sum((y - yh) ** 2))
-        w2 = weights[ch] ** 2 if isinstance(weights, dict) else 1.0 / (float(np.var(y)) or 1.0)
-        tot += per[ch] * w2
+        tot += per[ch] * weight_squared(weights, ch, y)
     return tot, per
 
 
@@ -309,7 +314,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     specs = el.parameters(rec.t, np.asarray(rec[where], float))
     sim = Simulator(nominal.system, energy=False)
     outs = data.outputs
-    w2 = {ch: (data.weights[ch] ** 2 if isinstance(data.weights, dict) else 1.0 / (float(np.var(rec[ch])) or 1.0)) for ch in outs}
+    w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
     def cost(theta):
         r = _transformed(rec, el, where, theta)

@@ -83,7 +83,7 @@ def global_starts(system, data, n: int) -> list[dict]:
     simulation fails are dropped); log-uniform for parameters whose range spans 1.5 decades or more."""
     from scipy.stats import qmc
 
-    from phs.workflows.diagnose.hypotheses import _simulate
+    from phs.workflows.diagnose.hypotheses import _simulate, weight_squared
 
     if not data.free or n <= 0:
         return []
@@ -92,7 +92,7 @@ def global_starts(system, data, n: int) -> list[dict]:
         return []
     unit = qmc.Sobol(d=len(data.free), scramble=True, seed=0).random(GLOBAL_SAMPLES)
     rec, outs = data.recording, data.outputs
-    w2 = {ch: (data.weights[ch] ** 2 if isinstance(data.weights, dict) else 1.0 / (float(np.var(rec[ch])) or 1.0)) for ch in outs}
+    w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
     x0 = data.x0
     sim = Simulator(system, energy=False)
     scored = []
