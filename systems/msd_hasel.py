@@ -14,8 +14,8 @@ coefficients of the two fits have no printed symbols; they are named
 ``a_v{i}, f_v{i}, c_v{i}, s_v{i}`` (voltage slope, offset, centre, width of eq. 10).
 
 Equations as implemented (single actuator, :func:`msd_hasel`), with ``X = 1000 x``
-the displacement in mm and ``U = V / 1000`` the voltage in kV (the units of the
-printed fits; forces in N)::
+the displacement in mm (``X = 100 x`` in cm with ``fit_length="cm"``) and
+``U = V / 1000`` the voltage in kV (the units of the printed fits; forces in N)::
 
     l_material(x) = sum_i A_m{i} exp(-((X - c_m{i}) / s_m{i})**2)            (eq. 8)
     l_volt(x, V)  = sum_i (a_v{i} U + f_v{i}) exp(-((X - c_v{i}) / s_v{i})**2) (eq. 10)
@@ -36,10 +36,11 @@ storage; the paper neglects the electrical dynamics, Fig. 7).  Energy balance:
 
 Deviations and choices (each discussed in ``docs/systems/msd_hasel.md``):
 
-* Units: eqs. 8 and 10 take x in mm and V in kV and give N.  States and inputs are
-  SI (``x`` in m, ``p`` in kg*m/s, ``V`` in volts); the expressions convert with
-  ``X = 1000 x`` and ``U = V/1000``.  The fit coefficients keep the printed values in
-  the printed units (``mm``, ``N/kV``, ``N``; see each Param's unit).
+* Units: eqs. 8 and 10 take V in kV and give N; the unit of x is not printed and is an
+  option, ``fit_length="mm"`` (default) or ``"cm"``.  States and inputs are SI (``x``
+  in m, ``p`` in kg*m/s, ``V`` in volts); the expressions convert with ``X = 1000 x``
+  (``100 x`` in cm) and ``U = V/1000``.  The fit coefficients keep the printed values in
+  the printed units (``N/kV``, ``N``, and ``fit_length`` for the centres and widths).
 * Eq. 10 prints ``e^{+((x-0.11)/0.11)^2}`` and ``e^{+((x-2.5)/0.2)^2}``: the minus
   signs of the Gaussians are restored (the surface of Fig. 6 is bounded).  The third
   term is subtracted in print; here it is written with ``a_v3 = -1.80`` N/kV and
@@ -81,9 +82,9 @@ Deviations and choices (each discussed in ``docs/systems/msd_hasel.md``):
 * Scale of motion: with x in mm, one actuator's 0 -> 5 kV stroke is at most 0.97 mm for
   any load up to 4.4 N, and the platform's end effector rises by 1.788 mm with all six
   actuators at 5 kV (at most 1.94 mm anywhere in the box of strokes for the chosen
-  geometry), well below the scale implied by the paper's 6.24 mm tracking error; the
-  printed fits leave the unit of x open, and reading it in cm scales every displacement
-  by 10 (section "Scale of motion" of the docs).
+  geometry), well below the scale implied by the paper's 6.24 mm tracking error.
+  ``fit_length="cm"`` scales every static displacement by exactly 10 (17.88 mm heave);
+  nothing in the paper's text settles the unit (section "Scale of motion" of the docs).
 
 The platform (:func:`hasel_platform`) is described in its docstring.
 """
@@ -122,7 +123,9 @@ from phs import (
 from phs.errors import ModelError
 
 MM_PER_M = sp.Integer(1000)
-"""Conversion of the state x [m] to the printed fits' displacement X = 1000 x [mm]."""
+"""Conversion of the state x [m] to the printed fits' displacement X = 1000 x [mm] (the default reading)."""
+FIT_LENGTHS = {"mm": 1000, "cm": 100}
+"""Readings of the unit of x in the printed fits (eqs. 8 and 10), each with its number of units per metre."""
 KV_PER_V = sp.Rational(1, 1000)
 """Conversion of the input V [V] to the printed fits' voltage U = V / 1000 [kV]."""
 
@@ -131,34 +134,59 @@ _VOLTAGE = ((0.49, 0.04, 0.11, 0.11), (0.66, -0.14, 0.31, 0.43), (-1.80, -4.60, 
 _FIT = [f"{k}_m{i}" for i in (1, 2, 3) for k in "Acs"] + [f"{k}_v{i}" for i in (1, 2, 3) for k in "afcs"]
 
 
-def default_parameters() -> dict[str, Param]:
+def _check_fit_length(fit_length, who: str) -> str:
+    if not isinstance(fit_length, str) or fit_length not in FIT_LENGTHS:
+        raise ModelError(f"{who}: fit_length must be one of {sorted(FIT_LENGTHS)} (the unit of x in the printed "
+                         f"fits, eqs. 8 and 10), got {fit_length!r}")
+    return fit_length
+
+
+def default_parameters(fit_length: str = "mm") -> dict[str, Param]:
     """The MSD HASEL's parameters: eqs. 8, 10-12 of the paper and the documented choices.
 
-    Fit coefficients keep the printed values in the printed units (mm, kV, N); the
-    others are SI.  Platform geometry is not printed in the paper and is chosen.
+    Fit coefficients keep the printed values in the printed units (kV, N and the
+    length unit ``fit_length`` of x: the centres and widths ``c_m{i}``, ``s_m{i}``,
+    ``c_v{i}``, ``s_v{i}`` carry it as their unit); the others are SI.  Platform
+    geometry is not printed in the paper and is chosen.
+
+    Parameters
+    ----------
+    fit_length : {"mm", "cm"}
+        The unit in which the printed fits read x (the paper does not print it; see
+        "Scale of motion" in ``docs/systems/msd_hasel.md``).  ``"cm"`` gives the same
+        force laws at ten times the displacements.
 
     Returns
     -------
     dict of str -> Param
+
+    Raises
+    ------
+    ModelError
+        For a ``fit_length`` other than ``"mm"`` or ``"cm"``.
 
     Examples
     --------
     >>> P = default_parameters()
     >>> P["A_m1"].value, P["A_m1"].unit, P["b"].value
     (2020000000.0, 'N', 1.0)
+    >>> P = default_parameters("cm")
+    >>> P["c_m1"].value, P["c_m1"].unit
+    (-0.69, 'cm')
     """
+    unit = _check_fit_length(fit_length, "default_parameters")
     P = []
     for i, (a, c, s) in enumerate(_MATERIAL, 1):
         P += [Param(f"A_m{i}", a, "N", f"amplitude of Gaussian {i} of the material force (eq. 8)"),
-              Param(f"c_m{i}", c, "mm", f"centre of Gaussian {i} of the material force (eq. 8, printed x + {-c})"),
-              Param(f"s_m{i}", s, "mm", f"width of Gaussian {i} of the material force (eq. 8)")]
+              Param(f"c_m{i}", c, unit, f"centre of Gaussian {i} of the material force (eq. 8, printed x + {-c})"),
+              Param(f"s_m{i}", s, unit, f"width of Gaussian {i} of the material force (eq. 8)")]
     for i, (a, f, c, s) in enumerate(_VOLTAGE, 1):
         P += [Param(f"a_v{i}", a, "N/kV", f"voltage slope of the amplitude of Gaussian {i} of the voltage force "
                                           f"(eq. 10{'; printed 1.80 with the term subtracted' if i == 3 else ''})"),
               Param(f"f_v{i}", f, "N", f"zero-voltage amplitude of Gaussian {i} of the voltage force "
                                        f"(eq. 10{'; printed 4.60 with the term subtracted' if i == 3 else ''})"),
-              Param(f"c_v{i}", c, "mm", f"centre of Gaussian {i} of the voltage force (eq. 10)"),
-              Param(f"s_v{i}", s, "mm", f"width of Gaussian {i} of the voltage force (eq. 10)")]
+              Param(f"c_v{i}", c, unit, f"centre of Gaussian {i} of the voltage force (eq. 10)"),
+              Param(f"s_v{i}", s, unit, f"width of Gaussian {i} of the voltage force (eq. 10)")]
     P += [
         Param("m", 0.05, "kg", "moving mass of one actuator: its share of the platform (2 plates / 3 actuators)",
               (0.005, 0.5)),
@@ -178,8 +206,20 @@ def _gaussian(X, c, s):
     return sp.exp(-(((X - c) / s) ** 2))
 
 
+def _per_metre(params: dict[str, Param]) -> sp.Integer:
+    """Fit length units per metre, from the unit the centres and widths of eqs. 8 and 10 carry (one for all)."""
+    units = {params[k].unit for k in _FIT if k[0] in "cs"}
+    if len(units) != 1 or not units <= FIT_LENGTHS.keys():
+        raise ModelError(f"the centres and widths of eqs. 8 and 10 must share one unit of {sorted(FIT_LENGTHS)}, "
+                         f"got {sorted(units)}")
+    return sp.Integer(FIT_LENGTHS[units.pop()])
+
+
 def material_force(x, params: dict[str, Param]) -> sp.Expr:
     """Eq. 8: the material's restoring force [N] (pushing the actuator open) at displacement ``x`` [m].
+
+    The fit reads x in the unit of the centres and widths in ``params`` (mm or cm,
+    see :func:`default_parameters`).
 
     Examples
     --------
@@ -190,12 +230,14 @@ def material_force(x, params: dict[str, Param]) -> sp.Expr:
     1.6636
     """
     S = {k: p.symbol for k, p in params.items()}
-    X = MM_PER_M * x
+    X = _per_metre(params) * x
     return sp.Add(*[S[f"A_m{i}"] * _gaussian(X, S[f"c_m{i}"], S[f"s_m{i}"]) for i in (1, 2, 3)])
 
 
 def voltage_force_terms(x, params: dict[str, Param]) -> tuple[sp.Expr, sp.Expr]:
     """Eq. 10 split as ``l_volt(x, V) = F_0(x) + beta(x) V``: returns ``(F_0 [N], beta [N/V])`` at ``x`` [m].
+
+    The fit reads x in the unit of the centres and widths in ``params`` (as :func:`material_force`).
 
     Examples
     --------
@@ -206,7 +248,7 @@ def voltage_force_terms(x, params: dict[str, Param]) -> tuple[sp.Expr, sp.Expr]:
     2.7952
     """
     S = {k: p.symbol for k, p in params.items()}
-    X = MM_PER_M * x
+    X = _per_metre(params) * x
     gs = [_gaussian(X, S[f"c_v{i}"], S[f"s_v{i}"]) for i in (1, 2, 3)]
     F0 = sp.Add(*[S[f"f_v{i}"] * g for i, g in zip((1, 2, 3), gs, strict=True)])
     beta = KV_PER_V * sp.Add(*[S[f"a_v{i}"] * g for i, g in zip((1, 2, 3), gs, strict=True)])
@@ -245,13 +287,19 @@ def _potential_of_force(force, x) -> sp.Expr:
     return -_antiderivative(force.xreplace({x: q}), q).xreplace({q: x})
 
 
-def _actuator(prefix: str, params: dict[str, Param], state: str, scale: float):
+def _stretch(params: dict[str, Param]) -> float:
+    """Millimetres per fit length unit: 1 with x read in mm, 10 in cm (state ranges and scales grow with it)."""
+    return float(MM_PER_M / _per_metre(params))
+
+
+def _actuator(prefix: str, params: dict[str, Param], state: str):
     """Components of one actuator on the displacement state ``state``.
 
     Returns the components, the port names to put in series with the body that
     moves with ``state``, the extra connections and the validity conditions.
     """
     q = sp.Symbol("q", real=True)
+    k = _stretch(params)
     x = symbol_of_state(state)
     mat = [params[k] for k in _FIT if "_m" in k]
     volt = [params[k] for k in _FIT if "_v" in k]
@@ -259,7 +307,7 @@ def _actuator(prefix: str, params: dict[str, Param], state: str, scale: float):
     V = f"{prefix}V" if prefix else "V"
     comps = [
         _Spring(f"{prefix}k_mat", force=-material_force(q, params), variable=q, params=mat, state=state,
-                range=(-0.5e-3, 2.0e-3), scale=scale),
+                range=(-0.5e-3 * k, 2.0e-3 * k), scale=1e-3 * k),
         Potential(f"{prefix}k_volt", _potential_of_force(F0, x), params=volt),
         Damper(f"{prefix}b", b=params["b"]),
         # e_a = n e_b, f_b = n f_a with n = -beta: force beta(x) V on the body, current beta(x) x' from the source
@@ -268,18 +316,20 @@ def _actuator(prefix: str, params: dict[str, Param], state: str, scale: float):
     ]
     S = {k: p.symbol for k, p in params.items()}
     who = f" ({prefix[:-1]})" if prefix else ""
+    c_m1 = params["c_m1"]
     conds = [
         Condition(f"input map beta(x) >= 0{who}", beta,
-                  "the voltage force's input map keeps its sign (x below its zero near 1.785 mm)"),
-        Condition(f"x above the centre of the compression wall{who}", MM_PER_M * x - S["c_m1"],
-                  "x >= c_m1 (-0.69 mm): beyond it the fitted material force decreases again"),
+                  f"the voltage force's input map keeps its sign (x below its zero, {1.785 * k:g} mm for the "
+                  f"printed coefficients read in {c_m1.unit})"),
+        Condition(f"x above the centre of the compression wall{who}", _per_metre(params) * x - S["c_m1"],
+                  f"x >= c_m1 ({c_m1.value:g} {c_m1.unit}): beyond it the fitted material force decreases again"),
     ]
     return comps, [f"{prefix}k_mat", f"{prefix}b", f"{prefix}volt.a"], [bond(f"{prefix}volt.b", V)], conds
 
 
-def _parameters(overrides: dict, who: str, used) -> dict[str, Param]:
-    """Default parameters with ``overrides``; names the model does not use are rejected."""
-    base = default_parameters()
+def _parameters(overrides: dict, who: str, used, fit_length) -> dict[str, Param]:
+    """Default parameters for ``fit_length`` with ``overrides`` (which win); names the model does not use are rejected."""
+    base = default_parameters(_check_fit_length(fit_length, who))
     unknown = [k for k in overrides if k not in used]
     if unknown:
         raise ModelError(f"{who}: unknown or unused parameter(s) {unknown}; {who} uses: {sorted(used)}")
@@ -288,7 +338,16 @@ def _parameters(overrides: dict, who: str, used) -> dict[str, Param]:
     return base
 
 
-def msd_hasel(*, load: bool = True, **overrides: float) -> PHSystem:
+def _suffix(fit_length: str) -> str:
+    """Model name suffix: none for the default reading (names unchanged), ``_cm`` otherwise."""
+    return "" if fit_length == "mm" else f"_{fit_length}"
+
+
+def _reading(fit_length: str) -> str:
+    return "" if fit_length == "mm" else f", fits read with x in {fit_length}"
+
+
+def msd_hasel(*, load: bool = True, fit_length: str = "mm", **overrides: float) -> PHSystem:
     """One expanding folded HASEL carrying a mass: the nonlinear mass-spring-damper of eqs. 3-12.
 
     States ``x`` (displacement from rest, m, positive = extension) and ``p``
@@ -301,8 +360,16 @@ def msd_hasel(*, load: bool = True, **overrides: float) -> PHSystem:
     ----------
     load : bool
         Include the weight ``m g`` of the carried mass (the documented preload).
+    fit_length : {"mm", "cm"}
+        Unit in which the printed fits (eqs. 8 and 10) read x, which the paper does not
+        print.  ``"mm"`` (default) gives strokes under 1 mm; ``"cm"`` the same force laws
+        at exactly ten times the displacements (the scale of the paper's platform; see
+        "Scale of motion" in ``docs/systems/msd_hasel.md``).  The centres and widths
+        carry this unit, so overrides of them are read in it.  The model is named
+        ``msd_hasel`` in mm and ``msd_hasel_cm`` in cm.
     **overrides : float
         Parameter values by name (``b=2.0``, ``m=0.03``); see :func:`default_parameters`.
+        They replace the defaults of the chosen ``fit_length``.
 
     Returns
     -------
@@ -311,8 +378,9 @@ def msd_hasel(*, load: bool = True, **overrides: float) -> PHSystem:
     Raises
     ------
     ModelError
-        If an override names a parameter this model does not use (``tau`` and the
-        platform's geometry act only in :func:`hasel_platform`).
+        If ``fit_length`` is not ``"mm"`` or ``"cm"``, or an override names a parameter
+        this model does not use (``tau`` and the platform's geometry act only in
+        :func:`hasel_platform`).
 
     Examples
     --------
@@ -322,11 +390,15 @@ def msd_hasel(*, load: bool = True, **overrides: float) -> PHSystem:
     >>> from phs import equilibrium
     >>> round(equilibrium(s, u={"V": 5000.0}, x0={"x": 0.5e-3})["x"] * 1e3, 3)   # mm under 0.49 N at 5 kV
     0.902
+    >>> s = msd_hasel(fit_length="cm")
+    >>> round(equilibrium(s, u={"V": 5000.0}, x0={"x": 5e-3})["x"] * 1e3, 3)     # the same force laws read in cm
+    9.021
     """
-    P = _parameters(overrides, "msd_hasel", _FIT + ["m", "b"] + (["g"] if load else []))
+    P = _parameters(overrides, "msd_hasel", _FIT + ["m", "b"] + (["g"] if load else []), fit_length)
     x = symbol_of_state("x")
-    comps, members, conns, conds = _actuator("", P, "x", 1e-3)
-    comps += [Mass("m", m=P["m"], state="p", range=(-0.025, 0.025), scale=1e-3),
+    k = _stretch(P)
+    comps, members, conns, conds = _actuator("", P, "x")
+    comps += [Mass("m", m=P["m"], state="p", range=(-0.025 * k, 0.025 * k), scale=1e-3 * k),
               ForceSource("F_load", range=(-5.0, 5.0)),
               # unit transformer between the mass (port a) and the load (port b): force -F_load on the mass and
               # output F_load.v = -x'
@@ -338,11 +410,12 @@ def msd_hasel(*, load: bool = True, **overrides: float) -> PHSystem:
     V = symbol_of_input("V")
     used = [P["m"], P["b"]] + ([P["g"]] if load else [])
     return interconnect(
-        "msd_hasel", comps, conns, params=used, conditions=conds,
+        "msd_hasel" + _suffix(fit_length), comps, conns, params=used, conditions=conds,
         measured=[Measured("displacement", x, "m", "actuator displacement from rest (positive = extension)"),
                   Measured("force_material", material_force(x, P), "N", "material force, eq. 8"),
                   Measured("force_voltage", F0 + beta * V, "N", "voltage force, eq. 10")],
-        description="expanding folded HASEL as a nonlinear mass-spring-damper (Hainsworth et al., eqs. 3-12)",
+        description="expanding folded HASEL as a nonlinear mass-spring-damper (Hainsworth et al., eqs. 3-12)"
+                    + _reading(fit_length),
     )
 
 
@@ -365,7 +438,7 @@ def _relative_angular_velocity(u, w, ud, wd):
     return sp.Matrix([(ud * C2 + u * w * wd) / (C2 * S), wd * S / C2, -u * wd / C2])
 
 
-def hasel_platform(stages: int = 2, **overrides: float) -> PHSystem:
+def hasel_platform(stages: int = 2, *, fit_length: str = "mm", **overrides: float) -> PHSystem:
     """Stacked plates carried by three MSD HASELs per stage: the paper's two-stage platform (Fig. 8).
 
     Each stage is a rigid plate (a uniform disc of mass ``m_p`` and radius ``r_p``)
@@ -412,8 +485,12 @@ def hasel_platform(stages: int = 2, **overrides: float) -> PHSystem:
     ----------
     stages : int
         Number of stacked stages (2 for the paper's platform).
+    fit_length : {"mm", "cm"}
+        Unit in which the printed fits read x, as in :func:`msd_hasel` (``"cm"``: ten
+        times the actuator strokes; the model is then named ``hasel_platform{stages}_cm``).
     **overrides : float
-        Parameter values by name (see :func:`default_parameters`).
+        Parameter values by name (see :func:`default_parameters`); they replace the
+        defaults of the chosen ``fit_length``.
 
     Returns
     -------
@@ -425,8 +502,9 @@ def hasel_platform(stages: int = 2, **overrides: float) -> PHSystem:
     Raises
     ------
     ModelError
-        If ``stages`` is not a positive integer or an override names a parameter the
-        platform does not use (``m``: the plates' mass is ``m_p``).
+        If ``stages`` is not a positive integer, ``fit_length`` is not ``"mm"`` or
+        ``"cm"``, or an override names a parameter the platform does not use (``m``: the
+        plates' mass is ``m_p``).
 
     Examples
     --------
@@ -438,7 +516,7 @@ def hasel_platform(stages: int = 2, **overrides: float) -> PHSystem:
     """
     if not isinstance(stages, int) or isinstance(stages, bool) or stages < 1:
         raise ModelError(f"hasel_platform: stages must be a positive integer, got {stages!r}")
-    P = _parameters(overrides, "hasel_platform", _FIT + ["b", "tau", "g", "m_p", "r_p", "r_a", "h_s"])
+    P = _parameters(overrides, "hasel_platform", _FIT + ["b", "tau", "g", "m_p", "r_p", "r_a", "h_s"], fit_length)
     S = {k: p.symbol for k, p in P.items()}
     m_p, r_a, h_s = S["m_p"], S["r_a"], S["h_s"]
     inertia = sp.diag(m_p * S["r_p"] ** 2 / 4, m_p * S["r_p"] ** 2 / 4, m_p * S["r_p"] ** 2 / 2)
@@ -477,7 +555,7 @@ def hasel_platform(stages: int = 2, **overrides: float) -> PHSystem:
         on_coord = {c: [f"plates.p{3 * (k - 1) + i + 1}"] for i, c in enumerate(("z", "hx", "hy"))}
         for j in (1, 2, 3):
             name = f"s{k}.a{j}"
-            c, members, extra, cd = _actuator(f"{name}.", P, f"{name}.x", 1e-3)
+            c, members, extra, cd = _actuator(f"{name}.", P, f"{name}.x")
             branches = []
             for coord, ratio in (("z", 1), ("hx", sp.cos(psi[j - 1])), ("hy", sp.sin(psi[j - 1]))):
                 if ratio == 0:
@@ -492,12 +570,14 @@ def hasel_platform(stages: int = 2, **overrides: float) -> PHSystem:
     M = sp.Matrix(n, n, lambda i, j: M[min(i, j), max(i, j)])
     momenta = [f"s{k}.p_{c}" for k in range(1, stages + 1) for c in ("z", "hx", "hy")]
     comps.append(ConfigurationInertia("plates", coords, M, params=[P["m_p"], P["r_p"], P["r_a"], P["h_s"]],
-                                      momenta=momenta, range=(-0.05, 0.05), scale=1e-3, domain="translational"))
+                                      momenta=momenta, range=(-0.05 * _stretch(P), 0.05 * _stretch(P)),
+                                      scale=1e-3 * _stretch(P), domain="translational"))
     measured = [Measured("ee.x", c_abs[0], "m", "end effector (centre of the top plate), x"),
                 Measured("ee.y", c_abs[1], "m", "end effector (centre of the top plate), y"),
                 Measured("ee.z", c_abs[2], "m", "end effector (centre of the top plate), height above the base"),
                 *measured]
     return interconnect(
-        f"hasel_platform{stages}", comps, conns, params=[P["b"], P["g"]], conditions=conds, measured=measured,
-        description=f"{stages}-stage platform of MSD HASELs, three per stage (Hainsworth et al., Fig. 8)",
+        f"hasel_platform{stages}{_suffix(fit_length)}", comps, conns, params=[P["b"], P["g"]], conditions=conds, measured=measured,
+        description=f"{stages}-stage platform of MSD HASELs, three per stage (Hainsworth et al., Fig. 8)"
+                    + _reading(fit_length),
     )
