@@ -162,29 +162,49 @@ ax[2].set_xlabel("t [s]")
 ax[2].legend(fontsize=8)
 save(fig, "msd_hasel_platform.png")
 
-# %% Scale of motion (docs/systems/msd_hasel.md): the end effector with all six actuators settled at 5 kV (b = 10 kg/s
-# only to settle quickly; the static pose does not depend on b), and the largest end-effector displacement the
-# linkage allows when every actuator may take any value of its 0 -> 5 kV stroke (vertices of the box of strokes)
-res6 = simulator(plat, rtol=1e-9).run(np.linspace(0.0, 1.0, 201), u={n: step(5e3, 0.05) for n in plat.input_names},
-                                      x0=rest, params={"b": 10.0})
-d6 = np.array([res6[f"ee.{c}"][-1] - res6[f"ee.{c}"][0] for c in "xyz"])
-print(f"all six at 5 kV: end effector moves {np.linalg.norm(d6) * 1e3:.3f} mm (x, y, z = "
-      + ", ".join(f"{v * 1e3:.3f}" for v in d6) + " mm)")
-STROKE = 0.969e-3  # largest 0 -> 5 kV stroke of one actuator over loads 0-4.4 N inside the validity domain (doc)
-ee_of = generate(plat).measured
-ee_idx = [plat.measured_names.index(f"ee.{c}") for c in "xyz"]
-x_idx = [i for i, n in enumerate(plat.state_names) if n.endswith(".x")]
+# %% Scale of motion (docs/systems/msd_hasel.md), under both readings of the unit of x in the printed fits
+# (fit_length "mm", the default, and "cm"): each actuator's static 0 -> 5 kV stroke under the two load shares, the end
+# effector with all six actuators settled at 5 kV (b = 10 kg/s only to settle quickly; the static pose does not depend
+# on b), and the largest end-effector displacement the linkage allows when every actuator may take any value of its
+# 0 -> 5 kV stroke (vertices of the box of strokes)
+STROKE_MM = 0.969e-3  # largest 0 -> 5 kV stroke of one actuator over loads 0-4.4 N inside the validity domain (doc)
 
 
-def ee_at(d):
-    """End effector [m] with the six actuators at displacements d (momenta zero)."""
-    x = np.zeros(len(plat.state_names))
-    x[x_idx] = d
-    return np.asarray(ee_of(x, np.zeros(len(plat.input_names)), plat.param_vector())).ravel()[ee_idx]
+def scale_of_motion(fit_length, single, plat):
+    k = {"mm": 1.0, "cm": 10.0}[fit_length]  # mm per fit length unit: the static displacements scale by it exactly
+    shares, strokes = ((1, 2 * m_p / 3), (2, m_p / 3)), []
+    rest = {}
+    for stage, share in shares:
+        x0, x5 = (equilibrium(single, u={"V": V}, x0={"x": 0.1e-3 * k}, params={"m": share})["x"] for V in (0.0, 5e3))
+        rest.update({f"s{stage}.a{j}.x": x0 for j in (1, 2, 3)})
+        strokes.append(x5 - x0)
+        print(f"[{fit_length}] stage {stage} actuator (load {share * 9.81:.3f} N): x(0 kV) = {x0 * 1e3:.4f} mm, "
+              f"x(5 kV) = {x5 * 1e3:.4f} mm, stroke {(x5 - x0) * 1e3:.4f} mm")
+    res6 = simulator(plat, rtol=1e-9).run(np.linspace(0.0, 1.0, 201), u={n: step(5e3, 0.05) for n in plat.input_names},
+                                          x0=rest, params={"b": 10.0})
+    d6 = np.array([res6[f"ee.{c}"][-1] - res6[f"ee.{c}"][0] for c in "xyz"])
+    print(f"[{fit_length}] all six at 5 kV: end effector moves {np.linalg.norm(d6) * 1e3:.3f} mm (x, y, z = "
+          + ", ".join(f"{v * 1e3:.3f}" for v in d6) + f" mm; sum of the stages' strokes {sum(strokes) * 1e3:.3f} mm)")
+    ee_of = generate(plat).measured
+    ee_idx = [plat.measured_names.index(f"ee.{c}") for c in "xyz"]
+    x_idx = [i for i, n in enumerate(plat.state_names) if n.endswith(".x")]
+
+    def ee_at(d):
+        """End effector [m] with the six actuators at displacements d (momenta zero)."""
+        x = np.zeros(len(plat.state_names))
+        x[x_idx] = d
+        return np.asarray(ee_of(x, np.zeros(len(plat.input_names)), plat.param_vector())).ravel()[ee_idx]
+
+    x_rest = np.array([rest[plat.state_names[i]] for i in x_idx])
+    stroke = STROKE_MM * k
+    reach = max(np.linalg.norm(ee_at(x_rest + stroke * np.array(v)) - ee_at(x_rest))
+                for v in itertools.product((0.0, 1.0), repeat=6))
+    print(f"[{fit_length}] largest end-effector displacement with every actuator anywhere in a {stroke * 1e3:.3f} mm "
+          f"stroke: {reach * 1e3:.3f} mm (h_s / r_a = {plat.param('h_s').value / plat.param('r_a').value:.3f})")
 
 
-x_rest = np.array([rest[plat.state_names[i]] for i in x_idx])
-reach = max(np.linalg.norm(ee_at(x_rest + STROKE * np.array(v)) - ee_at(x_rest))
-            for v in itertools.product((0.0, 1.0), repeat=6))
-print(f"largest end-effector displacement with every actuator anywhere in a {STROKE * 1e3:.3f} mm stroke: "
-      f"{reach * 1e3:.3f} mm (h_s / r_a = {plat.param('h_s').value / plat.param('r_a').value:.3f})")
+scale_of_motion("mm", single, plat)
+wall = time.perf_counter()
+single_cm, plat_cm = msd_hasel(fit_length="cm"), hasel_platform(2, fit_length="cm")
+print(f"fits read in cm: actuator and platform assembled in {time.perf_counter() - wall:.1f} s")
+scale_of_motion("cm", single_cm, plat_cm)
