@@ -5,6 +5,8 @@ Reference values are computed here from the printed eqs. 8 and 10 (x in mm, V in
 written independently of the model, with the minus signs of eq. 10's exponents restored.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.optimize
@@ -12,10 +14,12 @@ import sympy as sp
 
 from codegen import generate, simulate
 from phs import DomainError, ModelError, equilibrium
+from phs.errors import ParameterRangeWarning
 from phs.signals import Piecewise, step
-from systems.msd_hasel import hasel_platform, msd_hasel
+from systems.msd_hasel import default_parameters, hasel_platform, material_force, msd_hasel, voltage_force_terms
 
 G = 9.81
+CM = 1e-2  # m per fit length unit with fit_length="cm" (MM = 1e-3 is the default reading)
 M_DEFAULT = 0.05  # kg, the documented load of one bottom-stage actuator
 M_PLATE = 0.075  # kg, one platform plate
 
@@ -283,3 +287,117 @@ def test_platform_heave_at_5_kV_is_the_sum_of_the_stages_strokes(platform):
     dz = np.diff([np.asarray(fun.measured(poses[V], u, p)).ravel()[ee_z] for V in (0.0, 5.0)])[0]
     rise = sum(poses[5.0][:6] - poses[0.0][:6]) / 3
     assert dz == pytest.approx(rise, rel=1e-9) and dz == pytest.approx(1.788e-3, abs=1e-6)
+
+
+# -- the unit of x in the printed fits (fit_length) ----------------------------------------------------------------
+def _platform_static_heave(platform, metres_per_unit):
+    """End-effector rise [m] between the static poses at 0 and 5 kV on all six actuators, each actuator at the printed
+    force balance (brentq, x in fit units) under its load share; also the largest net force [N] at the 5 kV pose."""
+    fun, u, p = generate(platform), np.full(6, 5e3), platform.param_vector()
+    poses = {}
+    for V in (0.0, 5.0):
+        x = np.zeros(len(platform.state_names))
+        for k, plates in ((1, 2), (2, 1)):
+            for j in (1, 2, 3):
+                x[platform.state_names.index(f"s{k}.a{j}.x")] = (
+                    printed_static_displacement(V, plates * M_PLATE * G / 3) * metres_per_unit)
+        poses[V] = x
+    ee_z = platform.measured_names.index("ee.z")
+    dz = np.diff([np.asarray(fun.measured(poses[V], u, p)).ravel()[ee_z] for V in (0.0, 5.0)])[0]
+    return dz, float(np.max(np.abs(np.asarray(fun.rhs(poses[5.0], u, p)).ravel())))
+
+
+@pytest.fixture(scope="module")
+def hasel_cm():
+    return msd_hasel(fit_length="cm")
+
+
+def test_the_default_reading_is_millimetres_and_unchanged(hasel):
+    # names, units and values of the default model are those of the printed fits read in mm (the platform's default
+    # heave, 1.788 mm, is pinned by test_platform_heave_at_5_kV_is_the_sum_of_the_stages_strokes)
+    assert hasel.name == "msd_hasel" and hasel.param("c_v3").unit == "mm" and hasel.param("c_v3").value == 2.5
+    assert default_parameters() == default_parameters("mm")
+
+
+def _stretched_mm_parameters():
+    """The default (mm) parameters with every centre and width of eqs. 8 and 10 times ten: the hand-made overrides."""
+    return {k: (dataclasses.replace(p, value=10 * p.value, range=None) if k[:2] in ("c_", "s_") else p)
+            for k, p in default_parameters("mm").items()}
+
+
+def test_reading_x_in_cm_is_scaling_every_centre_and_width_by_ten():
+    # the identity the option rests on: the printed laws with x in cm are the laws with x in mm whose centres and widths
+    # are ten times the printed ones (the hand-made overrides the option replaces), at every x and V
+    x = sp.Symbol("x", real=True)
+    laws = []
+    for P in (default_parameters("cm"), _stretched_mm_parameters()):
+        vals = {p.symbol: p.value for p in P.values()}
+        F0, beta = voltage_force_terms(x, P)
+        laws.append(sp.lambdify([x], [e.subs(vals) for e in (material_force(x, P), F0, beta)]))
+    for x_m in (-4e-3, 0.0, 1.1e-3, 5e-3, 12e-3, 17.85e-3, 25e-3):
+        # 1e-12 relative: the same Gaussians in double precision, (100 x - c) / s against (1000 x - 10 c) / (10 s)
+        np.testing.assert_allclose(laws[0](x_m), laws[1](x_m), rtol=1e-12, atol=1e-300)
+
+
+def test_fit_length_cm_gives_exactly_ten_times_the_static_displacements(hasel, hasel_cm):
+    assert hasel_cm.name == "msd_hasel_cm" and hasel_cm.param("c_m1").unit == "cm"
+    for m in (0.02, 0.05):  # loads 0.20 and 0.49 N (single-valued statics below about 0.65 N)
+        x_mm, x_cm = 0.1e-3, 1e-3
+        for V in (0.0, 0.5, 2.0, 5.0):
+            x_mm = equilibrium(hasel, u={"V": V * 1e3}, x0={"x": x_mm}, params={"m": m})["x"]
+            x_cm = equilibrium(hasel_cm, u={"V": V * 1e3}, x0={"x": x_cm}, params={"m": m})["x"]
+            # 1e-6 relative: the equilibrium solver's accuracy, as in the test against brentq above (scaled rates below
+            # 1e-10, stiffness >= 1e2 N/m in cm); the force balance itself scales exactly (x in cm = 10 x in mm)
+            assert x_cm == pytest.approx(10 * x_mm, rel=1e-6), (m, V, x_mm, x_cm)
+            assert x_cm == pytest.approx(printed_static_displacement(V, m * G) * CM, rel=1e-6)
+
+
+def test_fit_length_survives_saving_and_overrides_win(hasel_cm, tmp_path):
+    # a saved model keeps the reading (the route from files and the command line: `phs ... model.json`)
+    from phs import PHSystem
+
+    hasel_cm.save(tmp_path / "cm.json")
+    loaded = PHSystem.load(tmp_path / "cm.json")
+    assert loaded.name == "msd_hasel_cm" and loaded.param("s_v3").unit == "cm"
+    x5 = printed_static_displacement(5.0, M_DEFAULT * G) * CM
+    assert equilibrium(loaded, u={"V": 5e3}, x0={"x": 1e-3})["x"] == pytest.approx(x5, rel=1e-6)  # solver accuracy
+    # explicit values replace the defaults of the chosen reading, in its unit (the symbolic laws are shared, so these
+    # builds reuse the cached energies)
+    over = msd_hasel(fit_length="cm", c_v3=2.0, b=3.0)
+    assert (over.param("c_v3").value, over.param("c_v3").unit, over.param("b").value) == (2.0, "cm", 3.0)
+    # the hand-made overrides of the default reading still give the cm statics: same equilibrium to solver accuracy
+    # (with a warning that the centres leave their declared mm ranges, which the option's Params do not)
+    with pytest.warns(ParameterRangeWarning, match="outside its declared range"):
+        by_hand = msd_hasel(**{k: p.value for k, p in _stretched_mm_parameters().items() if k[:2] in ("c_", "s_")})
+    assert by_hand.param("c_v3").unit == "mm"
+    assert equilibrium(by_hand, u={"V": 5e3}, x0={"x": 1e-3})["x"] == pytest.approx(x5, rel=1e-6)
+
+
+@pytest.mark.parametrize("build", [lambda: msd_hasel(fit_length="m"), lambda: msd_hasel(fit_length="CM"),
+                                   lambda: hasel_platform(2, fit_length="inch"), lambda: hasel_platform(1, fit_length=10),
+                                   lambda: default_parameters("um")])
+def test_a_bad_fit_length_is_one_clear_line(build):
+    with pytest.raises(ModelError) as err:
+        build()
+    text = str(err.value)
+    assert "\n" not in text and "fit_length must be one of ['cm', 'mm']" in text and "got" in text
+
+
+def test_mixed_length_units_in_the_fits_are_refused():
+    P = default_parameters("mm")
+    P["s_m2"] = default_parameters("cm")["s_m2"]
+    with pytest.raises(ModelError, match="share one unit"):
+        material_force(sp.Symbol("x", real=True), P)
+
+
+def test_platform_heave_with_the_fits_read_in_cm_is_ten_times_larger():
+    platform = hasel_platform(2, fit_length="cm")
+    assert platform.name == "hasel_platform2_cm"
+    dz_cm, residual = _platform_static_heave(platform, CM)
+    assert residual <= 1e-9  # the static poses are the platform's equilibria at 5 kV (net forces [N], as above)
+    rise_mm = sum(printed_static_displacement(5.0, k * M_PLATE * G / 3) - printed_static_displacement(0.0, k * M_PLATE * G / 3)
+                  for k in (1, 2)) * 1e-3  # the default reading's heave (1.788 mm), from the printed laws
+    # 1e-9 relative: ee.z is linear in the heaves and the displacements are exact multiples (brentq to 1e-14)
+    assert dz_cm == pytest.approx(10 * rise_mm, rel=1e-9) and dz_cm == pytest.approx(17.879e-3, abs=1e-6)
+    # the scale the paper's 6.24 mm RMS tracking error implies: several millimetres to centimetres
+    assert 5e-3 < dz_cm < 5e-2
