@@ -20,3 +20,7 @@ def test_msd_hasel_example_runs_and_writes_its_outputs(tmp_path):
     for row in ("| `A_m1` | 2.02e+09 | N |", "| `c_v3` | 2.5 | mm |", "| `a_v1` | 0.49 | N/kV |", "| `b` | 1 | kg/s |"):
         assert row in table, row
     assert "energy balance error" in proc.stdout
+    assert 'With `fit_length="cm"` the centres and widths `c_*`, `s_*` keep these values in unit cm' in table
+    # the scale of motion under both readings of the fits' length unit (the cm heave is ten times the mm one)
+    for line in ("[mm] all six at 5 kV: end effector moves 1.788 mm", "[cm] all six at 5 kV: end effector moves 17.879 mm"):
+        assert line in proc.stdout, line
