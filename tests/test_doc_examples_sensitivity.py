@@ -134,4 +134,5 @@ def test_sensitivity_example(size, tmp_path):
         if m and float(m.group(1)) >= 1500:
             kappa, ratio = float(m.group(2)), float(m.group(4)) / float(m.group(3))
             assert ratio == pytest.approx(kappa, rel=0.10), line
-            assert (ratio > 1) == (kappa > 1), line
+            if abs(kappa - 1) > 0.10:  # the order of gamma1 and gamma2 follows kappa outside the prediction's 10 %
+                assert (ratio > 1) == (kappa > 1), line  # (at 3 kV, kappa 1.037 and ratio 0.993: a tie within it)
