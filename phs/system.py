@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
+from phs._sparse import nonzero_entries, srepr_matrix
 from phs.errors import ModelError, ParameterError
 from phs.io import load_system, save_system
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
@@ -180,7 +181,8 @@ class PHSystem:
             elif p.value is None:
                 problems.append(f"parameter {p.name!r} has no value")
         auto = _domain_conditions(
-            [t.expr for t in self.energy_terms] + list(self.J) + list(self.R) + list(self.G) + [mo.expr for mo in self.measured],
+            [t.expr for t in self.energy_terms] + [v for M in (self.J, self.R, self.G) for _, _, v in nonzero_entries(M)]
+            + [mo.expr for mo in self.measured],
             name,
         )
         self.conditions = tuple(conditions) + tuple(c for c in auto if c.expr not in {k.expr for k in conditions})
@@ -523,8 +525,9 @@ class PHSystem:
         h = hashlib.sha256()
         for part in (
             self.name, [s.name for s in self.states], [i.name for i in self.inputs], self.param_names,
-            [sp.srepr(t.expr) for t in self.energy_terms], sp.srepr(self.J), sp.srepr(self.R), sp.srepr(self.G),
-            sp.srepr(self.P), sp.srepr(self.S), sp.srepr(self.N), [(m.name, sp.srepr(m.expr)) for m in self.measured],
+            [sp.srepr(t.expr) for t in self.energy_terms], *(srepr_matrix(M) for M in (self.J, self.R, self.G, self.P,
+                                                                                      self.S, self.N)),
+            [(m.name, sp.srepr(m.expr)) for m in self.measured],
             [(c.label, sp.srepr(c.expr)) for c in self.conditions],
             [(label, sorted((k, sp.srepr(v)) for k, v in entries.items())) for label, entries in self.dissipators],
         ):
