@@ -121,7 +121,7 @@ def _psd_samples(system, k: int = 8, seed: int = 0, with_params: bool = False, b
                     exprs.append(v)
                     where.append((nb, pos[i], pos[j]))
     zero_u = [0.0] * len(system.inputs)
-    f = system.lambdify(exprs)
+    f = system._lambdify(exprs, True, plain_names=True)
     worst = None
     for x, p in _points(system, k, seed, with_params):
         with np.errstate(all="ignore"):

@@ -71,6 +71,13 @@ def _domain_conditions(exprs, label: str) -> list[Condition]:
     return list(out.values())
 
 
+def _replaced(expr, rule: dict):
+    """``expr`` (an expression, a matrix or nested sequences of them) with symbols replaced by ``rule``."""
+    if isinstance(expr, (list, tuple)):
+        return type(expr)(_replaced(e, rule) for e in expr)
+    return expr.xreplace(rule) if isinstance(expr, sp.Basic) or isinstance(expr, sp.MatrixBase) else expr
+
+
 class PHSystem:
     """An immutable port-Hamiltonian system with named states, inputs and parameters.
 
@@ -399,7 +406,21 @@ class PHSystem:
         >>> float(s.lambdify(s.H)([1e-6], [0.0], s.param_vector()))   # Q**2 / (2 C)
         5e-07
         """
+        return self._lambdify(expr, with_u, plain_names=False)
+
+    def _lambdify(self, expr, with_u: bool, plain_names: bool) -> Callable[..., Any]:
+        """:meth:`lambdify`; with ``plain_names`` the symbols are first renamed to Python identifiers.
+
+        Names like ``"rod.ux1"`` are no Python identifiers: sympy replaces them one argument at a
+        time, each a pass over the whole expression (quadratic in the size of the model); one
+        replacement by plain names does it at once.  The function is the same, but the generated
+        code may order the terms of a sum differently (results can differ in the last bits), so
+        only the model's own construction checks use it.
+        """
         args = self.x + (self.u if with_u else []) + self.p
+        if plain_names:
+            plain = {a: sp.Symbol(f"_a{k}", **a.assumptions0) for k, a in enumerate(args)}
+            args, expr = list(plain.values()), _replaced(expr, plain)
         f = sp.lambdify(args, expr, modules=_NUMERIC_MODULES, cse=True)
         nx, nu = len(self.x), len(self.u)
 
