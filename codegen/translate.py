@@ -10,6 +10,7 @@ from __future__ import annotations
 import casadi as ca
 import sympy as sp
 
+from phs._sparse import nonzero_entries
 from phs.errors import ModelError
 
 _UNARY = {
@@ -36,14 +37,12 @@ class Translator:
         self.memo: dict = dict(symbols)
 
     def __call__(self, expr):
-        if isinstance(expr, sp.MatrixBase):
-            out = ca.SX(expr.rows, expr.cols)
-            for i in range(expr.rows):
-                for j in range(expr.cols):
-                    v = expr[i, j]
-                    if v != 0:
-                        out[i, j] = self(v)
-            return out
+        if isinstance(expr, sp.MatrixBase):  # only the nonzero entries, in row-major order
+            entries = nonzero_entries(expr)
+            if not entries:
+                return ca.SX(expr.rows, expr.cols)
+            rows, cols, vals = zip(*entries)
+            return ca.SX.triplet(list(rows), list(cols), ca.vertcat(*[self(v) for v in vals]), expr.rows, expr.cols)
         return self._rec(sp.sympify(expr))
 
     def _rec(self, e):

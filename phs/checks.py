@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
+from phs._sparse import nonzero_entries
 from phs.errors import UnitError
 from phs.storage_bound import bounded_below
 from phs.units import DIMENSIONLESS, JOULE, dimension, format_dim, parse_unit
@@ -77,14 +78,13 @@ def _blocks(M: sp.Matrix) -> list[list[int]]:
             a = parent[a]
         return a
 
-    for i in range(n):
-        for j in range(i + 1, n):
-            if M[i, j] != 0:
-                parent[find(i)] = find(j)
+    entries = nonzero_entries(M)
+    for i, j, _ in entries:
+        if j > i:
+            parent[find(i)] = find(j)
     groups: dict[int, list[int]] = {}
-    for i in range(n):
-        if M[i, i] != 0 or any(M[i, j] != 0 for j in range(n)):
-            groups.setdefault(find(i), []).append(i)
+    for i in sorted({i for i, _, _ in entries}):
+        groups.setdefault(find(i), []).append(i)
     return list(groups.values())
 
 
@@ -105,21 +105,33 @@ def _psd_samples(system, k: int = 8, seed: int = 0, with_params: bool = False, b
     blocks = blocks if blocks is not None else _blocks(D)
     if not blocks:
         return None
-    entries = [(i, j) for b in blocks for i in b for j in b if j >= i and D[i, j] != 0]
+    # the upper triangle of each block, row by row (the blocks are components: no entry leaves its block)
+    row_entries: dict[int, list[tuple[int, sp.Expr]]] = {}
+    for i, j, v in nonzero_entries(D):
+        if j >= i:
+            row_entries.setdefault(i, []).append((j, v))
+    members = [set(b) for b in blocks]
+    entries, exprs, where = [], [], []  # (i, j), D[i, j], (block, row in block, column in block)
+    for nb, b in enumerate(blocks):
+        pos = {i: a for a, i in enumerate(b)}
+        for i in b:
+            for j, v in row_entries.get(i, ()):
+                if j in members[nb]:
+                    entries.append((i, j))
+                    exprs.append(v)
+                    where.append((nb, pos[i], pos[j]))
     zero_u = [0.0] * len(system.inputs)
-    f = system.lambdify([D[i, j] for i, j in entries])
+    f = system._lambdify(exprs, True, plain_names=True)
     worst = None
     for x, p in _points(system, k, seed, with_params):
         with np.errstate(all="ignore"):
             vals = np.asarray(f(x, zero_u, p), dtype=float).reshape(-1)
         if not np.all(np.isfinite(vals)):
             continue
-        look = dict(zip(entries, vals))
-        for b in blocks:
-            Mb = np.zeros((len(b), len(b)))
-            for a, i in enumerate(b):
-                for c, j in enumerate(b):
-                    Mb[a, c] = look.get((min(i, j), max(i, j)), 0.0)
+        mats = [np.zeros((len(b), len(b))) for b in blocks]
+        for (nb, a, c), v in zip(where, vals):
+            mats[nb][a, c] = mats[nb][c, a] = v
+        for b, Mb in zip(blocks, mats):
             ev = np.linalg.eigvalsh(Mb)
             scale = float(np.max(np.abs(ev))) if len(ev) else 1.0
             if worst is None or ev[0] / max(scale, 1e-300) < worst["min_eig"] / max(worst["scale"], 1e-300):

@@ -21,8 +21,11 @@ from __future__ import annotations
 from collections import defaultdict
 
 import sympy as sp
+from sympy.core.exprtools import factor_terms
+from sympy.simplify.simplify import signsimp
 
 from phs._linsolve import StructuralProblem, solve_blt
+from phs._sparse import nonzero_entries
 from phs.component import Component, Piece, Port
 from phs.errors import InterconnectionError, ModelError
 from phs.junctions import Junction
@@ -272,23 +275,25 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
     outs = sp.Matrix([val(s.conjugate) for s in sources])
     n, m = len(storages), len(sources)
     zsyms = coenergy_syms + input_syms
-    A = _jac(rates, coenergy_syms)
-    B = _jac(rates, input_syms) if m else sp.zeros(n, 0)
-    C = _jac(outs, coenergy_syms) if m else sp.zeros(0, n)
-    D = _jac(outs, input_syms) if m else sp.zeros(0, 0)
+    tidy = _memo(_tidy_entry)  # element-wise models repeat the same coefficients: tidy each once
+    A = _jac(rates, coenergy_syms, tidy)
+    B = _jac(rates, input_syms, tidy) if m else sp.zeros(n, 0)
+    C = _jac(outs, coenergy_syms, tidy) if m else sp.zeros(0, n)
+    D = _jac(outs, input_syms, tidy) if m else sp.zeros(0, 0)
     leftover = (rates.free_symbols | outs.free_symbols) & (set(unknowns) | set(zsyms))
     for M in (A, B, C, D):
         if M.free_symbols & (set(unknowns) | set(zsyms)):
             raise ModelError(f"{name!r}: the port relations are not linear in the port variables ({leftover})")
-    J = _half(A - A.T)
-    R = _half(-(A + A.T))
-    G = _half(B + C.T)
-    P = _half(C.T - B)
-    S = _half(D + D.T)
-    N = _half(D - D.T)
+    J = _half(A - A.T, tidy)
+    R = _half(-(A + A.T), tidy)
+    G = _half(B + C.T, tidy)
+    P = _half(C.T - B, tidy)
+    S = _half(D + D.T, tidy)
+    N = _half(D - D.T, tidy)
 
     # dissipators: quadratic forms in z = [dH/dx; u]
     zindex = {z: i for i, z in enumerate(zsyms)}
+    zset = set(zsyms)
     diss = []
     for pc in pieces:
         for d in pc.dissipators:
@@ -297,11 +302,11 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
             else:
                 power = sum((val(p.effort) * val(p.flow) for p in d.ports), sp.Integer(0))
             entries = {}
-            zs = sorted(power.free_symbols & set(zsyms), key=lambda z: zindex[z])
+            zs = sorted(power.free_symbols & zset, key=lambda z: zindex[z])
+            first = {z: sp.diff(power, z) for z in zs}  # once per variable, shared by the pairs
             for a in range(len(zs)):
                 for b in range(a, len(zs)):
-                    h = sp.diff(power, zs[a], zs[b])
-                    h = _tidy_entry(h / 2 if a == b else h / 2)
+                    h = tidy(_second_derivative(power, first, zs[a], zs[b]) / 2)
                     if h != 0:
                         entries[(zindex[zs[a]], zindex[zs[b]])] = h
             diss.append((d.label, entries))
@@ -337,24 +342,58 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
     )
 
 
-def _jac(vec: sp.Matrix, syms) -> sp.Matrix:
+def _memo(f):
+    """``f`` remembering its results by argument (sympy expressions compare and hash by structure)."""
+    cache: dict = {}
+
+    def call(e):
+        try:
+            return cache[e]
+        except KeyError:
+            r = cache[e] = f(e)
+            return r
+
+    return call
+
+
+def _second_derivative(expr: sp.Expr, first: dict, a: sp.Symbol, b: sp.Symbol) -> sp.Expr:
+    """``sp.diff(expr, a, b)`` reusing the first derivatives ``first[z] = sp.diff(expr, z)``.
+
+    sympy differentiates in its canonical order of the variables and tidies a derivative of order
+    two with ``factor_terms(signsimp(.))``; both are reproduced, so the result is the one
+    ``sp.diff(expr, a, b)`` gives.  A repeated variable (``a == b``) is left to sympy, whose
+    derivative of order two of a product is not two first derivatives in a row.
+    """
+    if a == b:
+        return sp.diff(expr, a, b)
+    (v1, _), (v2, _) = sp.Derivative._sort_variable_count([(a, 1), (b, 1)])
+    d1 = first[v1]
+    if d1.is_zero:
+        return d1
+    d2 = sp.diff(d1, v2)
+    if d2.is_zero:
+        return d2
+    if d2.has(sp.Derivative):  # sympy makes unevaluated derivatives canonical first: leave that to it
+        return sp.diff(expr, a, b)
+    return factor_terms(signsimp(d2))
+
+
+def _jac(vec: sp.Matrix, syms, tidy) -> sp.Matrix:
     sset = set(syms)
     idx = {s: j for j, s in enumerate(syms)}
     out = sp.zeros(vec.rows, len(syms))
     for i in range(vec.rows):
         e = sp.expand(vec[i], deep=False, mul=True, multinomial=False, power_exp=False, power_base=False, log=False)
         for s in e.free_symbols & sset:
-            out[i, idx[s]] = _tidy_entry(sp.diff(e, s))
+            out[i, idx[s]] = tidy(sp.diff(e, s))
     return out
 
 
-def _half(M: sp.Matrix) -> sp.Matrix:
+def _half(M: sp.Matrix, tidy) -> sp.Matrix:
+    """``M / 2`` entry by entry, tidied; only the nonzero entries are visited."""
     out = sp.zeros(M.rows, M.cols)
-    for i in range(M.rows):
-        for j in range(M.cols):
-            v = M[i, j]
-            if v != 0:
-                out[i, j] = _tidy_entry(v / 2)
+    for i, j, v in nonzero_entries(M):
+        out[i, j] = tidy(v / 2)
     return out
 
 

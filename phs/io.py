@@ -33,6 +33,7 @@ from typing import Any, TypeVar
 
 import sympy as sp
 
+from phs._sparse import srepr_matrix
 from phs.errors import InputDataError, PHSError, UnitError
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo
 from phs.stored_expressions import parse_srepr
@@ -82,7 +83,7 @@ def system_to_dict(system) -> dict[str, Any]:
             for p in s.params
         ],
         "energy": [{"label": e.label, "expr": sp.srepr(e.expr)} for e in s.energy_terms],
-        "matrices": {k: sp.srepr(getattr(s, k)) for k in _MATRICES},
+        "matrices": {k: srepr_matrix(getattr(s, k)) for k in _MATRICES},
         "measured": [
             {"name": m.name, "expr": sp.srepr(sp.sympify(m.expr)), "unit": m.unit, "description": m.description}
             for m in s.measured

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
+from phs._sparse import nonzero_entries, srepr_matrix
 from phs.errors import ModelError, ParameterError
 from phs.io import load_system, save_system
 from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
@@ -68,6 +69,13 @@ def _domain_conditions(exprs, label: str) -> list[Condition]:
                 if not a.is_nonnegative:
                     out.setdefault(a, Condition(f"square-root argument >= 0 in {label}", a, f"{a} >= 0"))
     return list(out.values())
+
+
+def _replaced(expr, rule: dict):
+    """``expr`` (an expression, a matrix or nested sequences of them) with symbols replaced by ``rule``."""
+    if isinstance(expr, (list, tuple)):
+        return type(expr)(_replaced(e, rule) for e in expr)
+    return expr.xreplace(rule) if isinstance(expr, sp.Basic) or isinstance(expr, sp.MatrixBase) else expr
 
 
 class PHSystem:
@@ -180,7 +188,8 @@ class PHSystem:
             elif p.value is None:
                 problems.append(f"parameter {p.name!r} has no value")
         auto = _domain_conditions(
-            [t.expr for t in self.energy_terms] + list(self.J) + list(self.R) + list(self.G) + [mo.expr for mo in self.measured],
+            [t.expr for t in self.energy_terms] + [v for M in (self.J, self.R, self.G) for _, _, v in nonzero_entries(M)]
+            + [mo.expr for mo in self.measured],
             name,
         )
         self.conditions = tuple(conditions) + tuple(c for c in auto if c.expr not in {k.expr for k in conditions})
@@ -397,7 +406,21 @@ class PHSystem:
         >>> float(s.lambdify(s.H)([1e-6], [0.0], s.param_vector()))   # Q**2 / (2 C)
         5e-07
         """
+        return self._lambdify(expr, with_u, plain_names=False)
+
+    def _lambdify(self, expr, with_u: bool, plain_names: bool) -> Callable[..., Any]:
+        """:meth:`lambdify`; with ``plain_names`` the symbols are first renamed to Python identifiers.
+
+        Names like ``"rod.ux1"`` are no Python identifiers: sympy replaces them one argument at a
+        time, each a pass over the whole expression (quadratic in the size of the model); one
+        replacement by plain names does it at once.  The function is the same, but the generated
+        code may order the terms of a sum differently (results can differ in the last bits), so
+        only the model's own construction checks use it.
+        """
         args = self.x + (self.u if with_u else []) + self.p
+        if plain_names:
+            plain = {a: sp.Symbol(f"_a{k}", **a.assumptions0) for k, a in enumerate(args)}
+            args, expr = list(plain.values()), _replaced(expr, plain)
         f = sp.lambdify(args, expr, modules=_NUMERIC_MODULES, cse=True)
         nx, nu = len(self.x), len(self.u)
 
@@ -523,8 +546,9 @@ class PHSystem:
         h = hashlib.sha256()
         for part in (
             self.name, [s.name for s in self.states], [i.name for i in self.inputs], self.param_names,
-            [sp.srepr(t.expr) for t in self.energy_terms], sp.srepr(self.J), sp.srepr(self.R), sp.srepr(self.G),
-            sp.srepr(self.P), sp.srepr(self.S), sp.srepr(self.N), [(m.name, sp.srepr(m.expr)) for m in self.measured],
+            [sp.srepr(t.expr) for t in self.energy_terms], *(srepr_matrix(M) for M in (self.J, self.R, self.G, self.P,
+                                                                                      self.S, self.N)),
+            [(m.name, sp.srepr(m.expr)) for m in self.measured],
             [(c.label, sp.srepr(c.expr)) for c in self.conditions],
             [(label, sorted((k, sp.srepr(v)) for k, v in entries.items())) for label, entries in self.dissipators],
         ):
