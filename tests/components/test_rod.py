@@ -1,7 +1,7 @@
 """The planar Cosserat rod: structure (J skew, R PSD), statics against a boundary-value solution of the
 same continuum rod (``scipy.integrate.solve_bvp``), linear frequencies against the Euler–Bernoulli
-closed form, the semi-discrete energy balance and the observed order of convergence.  The comparison
-with ``pyelastica`` (settled tip under load, accuracy and run time) is in ``bench/rod.py``.
+closed form, the semi-discrete energy balance and the observed order of convergence.  The dynamics against
+``pyelastica`` are in ``test_rod_pyelastica.py``, the run time at equal accuracy in ``bench/rod.py``.
 
 The reference solutions here are written independently of the model: the continuum equations of the
 planar Simo–Reissner rod, ``r' = R(theta)(e1 + nu)``, ``theta' = m/EI``, ``n' = -f``, ``m' = -(r' x n)``
