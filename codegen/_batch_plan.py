@@ -64,7 +64,7 @@ def plan_shape(sim, t: np.ndarray, u) -> Shape:
     """
     sigs = input_signals(sim.system, u, t)
     segs, slots = plan_segments(sigs, t)
-    sampled = [(np.asarray(sg.times), np.asarray(sg.values)) if isinstance(sg, Sampled) else None for sg in sigs]
+    sampled = [sg.arrays if isinstance(sg, Sampled) else None for sg in sigs]
     nt, nu = len(t), len(sigs)
     U = np.zeros((nt, nu))
     U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does

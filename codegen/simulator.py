@@ -249,7 +249,7 @@ class Simulator:
         segs, slots = plan_segments(sigs, t)
         if len(x) == 0:  # a static network: nothing to integrate, outputs follow the inputs
             return self._static_result(t, sigs, segs, slots, p, wall)
-        sampled = [(np.asarray(sg.times), np.asarray(sg.values)) if isinstance(sg, Sampled) else None for sg in sigs]
+        sampled = [sg.arrays if isinstance(sg, Sampled) else None for sg in sigs]
         nq = len(energy_columns(s)) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))

@@ -19,16 +19,8 @@ import sympy as sp
 from codegen.functions import _model_hash, generate
 from codegen.simulator import Simulator, step_windows
 from phs.params import TIME
+from phs.signals import linear_kinks
 from phs.workflows.identify.c_library import _Library
-
-
-def _kinks(U: np.ndarray) -> list[int]:
-    """Sample indices where a uniformly sampled input's slope changes (its linear interpolant's kinks)."""
-    if U.size == 0 or len(U) < 3:
-        return []
-    d2 = np.abs(U[2:] - 2 * U[1:-1] + U[:-2])
-    tol = 1e-12 * max(float(np.max(np.abs(U))), 1e-300)
-    return sorted({int(k) + 1 for k in np.nonzero(np.any(d2 > tol, axis=1))[0]})
 
 
 # compile by default when the fit is large: samples x (1 + directions) x the dynamics' size above this
@@ -104,7 +96,7 @@ class _Problem:
         # as sampled) is integrated piece by piece with restarts at its kinks, so CVODES takes long
         # steps in between; otherwise it is interpolated and the step bounded by the sample interval
         # (in windows whose step bound follows the input's smoothness: see ``step_windows``)
-        kinks = _kinks(U)
+        kinks = linear_kinks(U)
         piecewise = nu > 0 and len(kinks) <= max(20, (N - 1) // 20)
         windows = step_windows(U) if nu > 0 and not piecewise else []
         cuts = sorted(set(self.ms_edges) | (set(kinks) if piecewise else {w[0] for w in windows}))
