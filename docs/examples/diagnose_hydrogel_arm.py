@@ -7,8 +7,10 @@
 # by a 3.6 V square wave, 15 s on, 15 s off) with webcam-like noise, and `phs.diagnose` is given the
 # nominal arm and the recording.  Validation: the Table II protocol (one 15 s pulse at 3.6 V, then the
 # free return).
-# Run: python docs/examples/diagnose_hydrogel_arm.py [--quick]
-# Writes docs/figures/diagnose_hydrogel_arm_{fits,locate,hypotheses}.png (into $PHS_DOCS_OUT when set).
+# Run: python docs/examples/diagnose_hydrogel_arm.py [--quick] [--csv DIR]
+# Writes docs/figures/diagnose_hydrogel_arm_{fits,locate,hypotheses}.png (into $PHS_DOCS_OUT when set); with
+# --csv DIR it only writes the two recordings as DIR/arm_train.csv and DIR/arm_valid.csv for `phs diagnose`
+# (the model: docs/examples/diagnose_hydrogel_arm.py:arm).
 
 # %%
 import os
@@ -76,6 +78,15 @@ if __name__ == "__main__":
     nominal = arm()
     train = record(nominal, TRAIN, square_wave, 1)
     valid = record(nominal, VALID, pulse, 2)
+    if "--csv" in sys.argv:
+        folder = sys.argv[sys.argv.index("--csv") + 1]
+        os.makedirs(folder, exist_ok=True)
+        for name, rec in (("arm_train.csv", train), ("arm_valid.csv", valid)):
+            columns = ["t", *(f"V{i}" for i in SVAS), "tip"]
+            data = np.column_stack([rec.t] + [rec[c] for c in columns[1:]])
+            np.savetxt(os.path.join(folder, name), data, delimiter=",", header=",".join(columns), comments="")
+            print(f"wrote {os.path.join(folder, name)}")
+        sys.exit(0)
     wall = time.perf_counter()
     d = diagnose(nominal, train, validation=valid, free=["rod.E"], outputs=["tip"])
     seconds = time.perf_counter() - wall
