@@ -3,7 +3,7 @@
 Default suite: the ``time_delay`` candidate attaches to the three heater inputs driven by the recorded
 square wave as one place, and through it the nominal arm reproduces the concealed (noise-free) recording
 at the true delay; the element's search with the model fixed at the truth finds the delay.  Slow: the
-example's whole diagnosis in quick mode (several minutes on 2 cores).
+example's whole diagnosis in quick mode (about 9 min on the shared 2-core machine at load 6).
 """
 
 import importlib.util
