@@ -459,6 +459,21 @@ def _state_name(effect: str, local: str, tag: str) -> str:
 
 
 # -- input elements ------------------------------------------------------------------------------------------------
+INPUT_GROUP = "+"
+"""Joins the inputs of one place of an input element (inputs driven by the same command)."""
+
+
+def input_members(where: str) -> list[str]:
+    """The inputs of an input element's place: ``"V4+V9"`` → ``["V4", "V9"]``, ``"U"`` → ``["U"]``.
+
+    Examples
+    --------
+    >>> input_members("V4+V9+V15"), input_members("U")
+    (['V4', 'V9', 'V15'], ['U'])
+    """
+    return where.split(INPUT_GROUP)
+
+
 class InputElement(Candidate):
     """An element between the recorded input and the model's input (drive electronics, transport):
     :meth:`transform` maps the sampled input with parameter values ``theta`` (one per entry of
@@ -468,6 +483,45 @@ class InputElement(Candidate):
 
     def attach_points(self, system) -> list[str]:
         return list(system.input_names)
+
+    def places(self, system, commands: dict) -> list[str]:
+        """Where the element is tried, given the recorded command of each input (``commands[name]``):
+        every attach point whose command varies (on a constant one the element changes nothing), with
+        the inputs driven by the very same command joined into one place ``a+b+c`` (an element in each
+        of their drives, with one set of parameters: several actuators of one kind driven together, as
+        :func:`with_groups` joins the parts of identical segments).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from components.candidates import TimeDelay
+        >>> from systems.hydrogel_arm import hydrogel_arm
+        >>> arm = hydrogel_arm(per_segment=1, svas=[4, 9, 15])
+        >>> pulse = np.array([0.0, 3.6, 3.6, 0.0])
+        >>> TimeDelay().places(arm, {"V4": pulse, "V9": pulse, "V15": pulse})
+        ['V9+V4+V15']
+        >>> TimeDelay().places(arm, {"V4": pulse, "V9": 0 * pulse, "V15": 2 * pulse})
+        ['V4', 'V15']
+        """
+        groups: list[tuple[np.ndarray, list[str]]] = []
+        for n in self.attach_points(system):
+            u = np.asarray(commands[n], float)
+            if np.ptp(u) == 0:
+                continue
+            for command, members in groups:
+                if command.shape == u.shape and np.array_equal(command, u):
+                    members.append(n)
+                    break
+            else:
+                groups.append((u, [n]))
+        return [INPUT_GROUP.join(members) for _, members in groups]
+
+    def _check_where(self, system, where: str) -> None:
+        points = self.attach_points(system)
+        bad = [n for n in input_members(where) if n not in points]
+        if bad:
+            raise ModelError(f"candidate {self.effect!r} cannot attach to {where!r} of {system.name!r}; "
+                             f"possible: {points or 'none'} (or several joined by {INPUT_GROUP!r})")
 
     @abstractmethod
     def parameters(self, t, u) -> list[tuple[str, float, float, float]]:

@@ -104,11 +104,24 @@ class Data:
 
 
 def _transformed(rec: Recording, element, where: str, theta) -> Recording:
+    """``rec`` with the input element (parameters ``theta``) applied to the command of every input of its
+    place (one input, or several driven together: :func:`components.candidates.base.input_members`)."""
     if element is None:
         return rec
+    from components.candidates.base import input_members
+
     sig = dict(rec.signals)
-    sig[where] = element.transform(rec.t, np.asarray(rec[where], float), theta)
+    for name in input_members(where):
+        sig[name] = element.transform(rec.t, np.asarray(rec[name], float), theta)
     return Recording(rec.t, sig, rec.source, rec.units)
+
+
+def command(rec: Recording, where: str) -> np.ndarray:
+    """The recorded command at an input element's place (its first input's: the inputs of a place share
+    their command in the training recording, which is how the place was formed)."""
+    from components.candidates.base import input_members
+
+    return np.asarray(rec[input_members(where)[0]], float)
 
 
 def _simulate(system, rec: Recording, x0, params=None, sim=None):
@@ -303,12 +316,12 @@ def neutral_point(nominal: Scored, aug, data: Data) -> Scored:
     label = f"{aug.effect}@{aug.attached_to}"
     n_params = len(data.free) + max(len(aug.free), aug.n_params)
     if aug.element is not None or not aug.neutral:
-        theta = aug.element.neutral(data.recording.t, np.asarray(data.recording[aug.attached_to], float)) if aug.element else None
+        theta = aug.element.neutral(data.recording.t, command(data.recording, aug.attached_to)) if aug.element else None
         h = Scored(label, nominal.system, dict(nominal.values), nominal.x0, n_params, dict(nominal.fit_percent),
                    dict(nominal.validation_fit_percent), nominal.rss, nominal.validation_rss, math.inf, nominal.residuals,
                    dict(nominal.simulated), 0.0, aug)
         if theta is not None:
-            specs = aug.element.parameters(data.recording.t, np.asarray(data.recording[aug.attached_to], float))
+            specs = aug.element.parameters(data.recording.t, command(data.recording, aug.attached_to))
             h.element_values = {f"{aug.element.effect}.{sp[0]}": float(v) for sp, v in zip(specs, theta, strict=True)}
             h.n_params = len(data.free) + len(specs)
         h.bic = nominal.bic + (h.n_params - nominal.n_params) * math.log(max(len(data.recording) * len(data.outputs), 1))
@@ -342,75 +355,110 @@ def _default_log(system, free) -> list:
     return out
 
 
-def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool = True, max_iter: int | None = None) -> Scored:
-    """Input elements: a bounded search of the element's parameters with the nominal parameters at their
-    fit (one simulation per trial), never ending above the element's neutral point, then a refit of the
-    nominal parameters through the element (kept at the nominal values when the refit fails)."""
-    import scipy.optimize
+ELEMENT_ROUNDS = 8
+"""Most rounds of a joint fit of an input element: its parameters searched with the model's fixed, then the
+model refitted through it, until a round lowers the training cost by less than :data:`ELEMENT_TOL`.  One
+round is not enough when a nominal parameter absorbed part of the effect: on the hydrogel arm with a 2 s
+delay in its heater drives, the nominal fit softens the backbone by 5 %, the search with that stiffness
+finds 1.33 s, and the refit through 1.33 s stops at a stiffness between the two (validation fit 86.4 %);
+alternating reaches the concealed delay (``docs/systems/hydrogel_arm.md``).  Screening fits run one round."""
+ELEMENT_TOL = 1e-3
+"""Relative decrease of the training cost below which the rounds of an input element's fit stop."""
 
+
+def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool = True, max_iter: int | None = None) -> Scored:
+    """Input elements: a bounded search of the element's parameters with the model's parameters fixed (one
+    simulation per trial), never ending above the element's neutral point, then a refit of the nominal
+    parameters through the element (kept when the refit fails); a joint fit alternates the two until the
+    cost stops falling (:data:`ELEMENT_ROUNDS`), a screening fit runs them once."""
     el, where = aug.element, aug.attached_to
     rec = data.recording
-    specs = el.parameters(rec.t, np.asarray(rec[where], float))
-    sim = Simulator(nominal.system, rtol=data.rtol, energy=False)
+    specs = el.parameters(rec.t, command(rec, where))
     outs = data.outputs
     w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
-    seen: dict = {}
+    def cost_of(system, x0):
+        sim = Simulator(system, rtol=data.rtol, energy=False)
+        seen: dict = {}
 
-    def cost(theta):  # one simulation per distinct trial (the neutral point is often on the grid)
-        key = tuple(float(v) for v in theta)
-        if key not in seen:
-            r = _transformed(rec, el, where, theta)
+        def cost(theta):  # one simulation per distinct trial (the neutral point is often on the grid)
+            key = tuple(float(v) for v in theta)
+            if key not in seen:
+                r = _transformed(rec, el, where, theta)
+                try:
+                    s = _simulate(system, r, x0, sim=sim)
+                    seen[key] = sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
+                except (PHSError, RuntimeError):
+                    seen[key] = math.inf
+            return seen[key]
+
+        return cost
+
+    cost = cost_of(nominal.system, nominal.x0)
+    theta = _element_search(cost, specs, [s[1] for s in specs])
+    neutral = el.neutral(rec.t, command(rec, where))
+    if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
+        theta = [float(v) for v in neutral]
+    values, x0, recovery = dict(nominal.values), nominal.x0, ""
+    if data.free or data.estimate_x0:  # refit the model through the element
+        from phs.workflows.diagnose.retry import RECOVERABLE, reason
+
+        before = cost(theta)
+        for _ in range(ELEMENT_ROUNDS if joint else 1):
             try:
-                s = _simulate(nominal.system, r, nominal.x0, sim=sim)
-                seen[key] = sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
-            except (PHSError, RuntimeError):
-                seen[key] = math.inf
-        return seen[key]
+                fit = identify(nominal.system.with_params(values), _transformed(rec, el, where, theta), data.free,
+                               bounds=data.bounds or None, x0=dict(zip(nominal.system.state_names, map(float, x0), strict=True)),
+                               outputs=outs, log_scale=data.log_scale or None, rtol=_rtol(data, joint),
+                               max_iter=max_iter or (30 if joint else SCREEN_ITER), ftol=1e-6 if joint else 1e-3,
+                               compile=None if joint else False, estimate_x0=data.estimate_x0, weights=_fixed(data.weights))
+            except RECOVERABLE as exc:
+                if not recovery:
+                    recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the values before it"
+                break
+            cost = cost_of(nominal.system.with_params(fit.values), fit.x0)
+            refitted = cost(theta)
+            if not refitted <= before:  # a refit that ends worse is not taken
+                break
+            values, x0 = fit.values, fit.x0
+            if not joint:
+                break
+            theta = _element_search(cost, specs, theta)
+            after = cost(theta)
+            if before - after <= ELEMENT_TOL * before:
+                break
+            before = after
+    ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
+    h = score(f"{aug.effect}@{where}", nominal.system, values, x0, len(data.free) + len(specs), data,
+              augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
+    h.recovery = recovery
+    return _never_worse(nominal, h, aug, data, t0)
 
-    theta = [s[1] for s in specs]
+
+def _element_search(cost, specs, theta) -> list[float]:
+    """Each of an input element's parameters in turn: a coarse grid over its range (log-spaced where the
+    range is positive, with 0 when the range starts there), then a bounded refinement around the best grid
+    point; never ends above the cost of ``theta`` itself."""
+    import scipy.optimize
+
+    theta = [float(v) for v in theta]
     for k, (_name, _start, lo, hi) in enumerate(specs):
-        # coarse grid (log-spaced where the range is positive) then bounded refinement
         grid = np.geomspace(max(lo, 1e-3 * hi), hi, 9) if lo >= 0 else np.linspace(lo, hi, 9)
         if lo == 0:
             grid = np.concatenate([[0.0], grid])
-        vals = []
-        for g in grid:
-            th = list(theta)
-            th[k] = g
-            vals.append(cost(th))
-        b = int(np.argmin(vals))
-        a, c = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
 
         def f1(v, k=k):
             th = list(theta)
             th[k] = v
             return cost(th)
 
+        vals = [f1(g) for g in grid]
+        b = int(np.argmin(vals))
+        best, best_cost = float(grid[b]), vals[b]
+        a, c = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
         if c > a:
             r = scipy.optimize.minimize_scalar(f1, bounds=(a, c), method="bounded", options={"xatol": 1e-3 * (c - a), "maxiter": 8})
-            theta[k] = float(r.x) if r.fun <= vals[b] else float(grid[b])
-        else:
-            theta[k] = float(grid[b])
-    neutral = el.neutral(rec.t, np.asarray(rec[where], float))
-    if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
-        theta = [float(v) for v in neutral]
-    transformed = _transformed(rec, el, where, theta)
-    ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
-    values, x0, recovery = dict(nominal.values), nominal.x0, ""
-    if data.free or data.estimate_x0:  # refit the model through the element
-        from phs.workflows.diagnose.retry import RECOVERABLE, reason
-
-        try:
-            fit = identify(nominal.system, transformed, data.free, bounds=data.bounds or None, x0=dict(
-                zip(nominal.system.state_names, map(float, nominal.x0), strict=True)), outputs=outs,
-                log_scale=data.log_scale or None, rtol=_rtol(data, joint), max_iter=max_iter or (30 if joint else SCREEN_ITER),
-                ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0,
-                weights=_fixed(data.weights))
-            values, x0 = fit.values, fit.x0
-        except RECOVERABLE as exc:
-            recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the nominal values"
-    h = score(f"{aug.effect}@{where}", nominal.system, values, x0, len(data.free) + len(specs), data,
-              augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
-    h.recovery = recovery
-    return _never_worse(nominal, h, aug, data, t0)
+            if r.fun <= best_cost:
+                best, best_cost = float(r.x), float(r.fun)
+        if best_cost <= f1(theta[k]):
+            theta[k] = best
+    return theta

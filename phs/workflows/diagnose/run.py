@@ -140,9 +140,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                            {ch: data.recording[ch] for ch in outs})
         augs = []
         for c in pool:
-            for w in c.attach_points(current.system):
-                if c.kind == "input" and np.ptp(np.asarray(data.recording[w], float)) == 0:
-                    continue  # a constant input: saturation, slew rate or delay change nothing
+            # an input element goes where the command varies, inputs driven together as one place
+            places = (c.places(current.system, {n: data.recording[n] for n in current.system.input_names})
+                      if c.kind == "input" else c.attach_points(current.system))
+            for w in places:
                 if any(a.augmentation.effect == c.effect and a.augmentation.attached_to == w for a in accepted):
                     continue
                 try:
@@ -228,9 +229,9 @@ def _coloured(findings, h, data) -> bool:
 
 
 def _through_element(data, h):
-    from phs.workflows.diagnose.hypotheses import _transformed
+    from phs.workflows.diagnose.hypotheses import _transformed, command
 
     el, where = h.augmentation.element, h.augmentation.attached_to
-    theta = [h.element_values[f"{el.effect}.{s}"] for s in [p[0] for p in el.parameters(data.recording.t, data.recording[where])]]
+    theta = [h.element_values[f"{el.effect}.{s}"] for s in [p[0] for p in el.parameters(data.recording.t, command(data.recording, where))]]
     return replace(data, recording=_transformed(data.recording, el, where, theta),
                    validation=_transformed(data.validation, el, where, theta))
