@@ -108,12 +108,18 @@ def main(argv=None) -> int:
     ap.add_argument("--library", default=",".join(LIBRARY_CASES), help="in-library cases ('all', or none with '')")
     ap.add_argument("--jobs", type=int, default=None)
     ap.add_argument("--data", default=DATA, help="directory of the real recordings (default ../shared/data)")
+    ap.add_argument("--cases", default="", help="comma-separated novel cases (default: every one)")
     ap.add_argument("--only", default="", help="comma-separated parts to run: novel, library, silverbox (default all)")
     args = ap.parse_args(argv)
     seconds = 3.0 if args.quick else args.seconds
     novel = ["engaging_spring", "softening_stiffness"] if args.quick else list(NOVEL)
     parts = set(args.only.split(",")) if args.only else {"novel", "library", "silverbox"}
     novel = novel if "novel" in parts else []
+    if args.cases:
+        unknown = [c for c in args.cases.split(",") if c not in NOVEL]
+        if unknown:
+            ap.error(f"unknown case(s) {unknown}; known: {', '.join(NOVEL)}")
+        novel = [c for c in args.cases.split(",") if "novel" in parts]
     results = []
     for e in novel:
         r = novel_case(e, seconds, args.jobs)
