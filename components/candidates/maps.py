@@ -11,14 +11,17 @@ it port-Hamiltonian.
     An additive correction ``y_m + h(x)`` of a measured output: a sensor's reading, not a power port;
     ``J``, ``R``, ``H`` and the port outputs are unchanged.
 :func:`add_heated_dissipation`
-    A conductance ``g`` on a state's effort ``e`` whose value rises with the heat it has dissipated: one
-    new storage ``z`` (the heat, [J]) with ``H_z = s z² / (2 E)``, so its effort ``T = s z / E`` is the
-    relative rise of the conductance.  ``R[i, i] += g`` (the base dissipation, ``g e²`` leaves the model),
-    ``J[z, i] = g e = −J[i, z]`` (a power-conserving coupling: ``ż`` gains the base dissipated power
-    ``g e²`` while the state loses ``g T e`` — the network sees the conductance ``g (1 + T)`` and the
-    extra power ``g T e²`` is stored in ``z``, never created), ``R[z, z] = E / (s τ)`` (``z`` relaxes as
-    ``ż = g e² − z/τ``).  ``J`` stays skew, ``R`` positive semi-definite, ``H_z ≥ 0``: passive by
-    construction.  From ``z(0) = 0``, ``z ≥ 0`` and ``T ≥ 0``: the conductance can only rise.
+    A conductance ``g`` on a state's effort ``e`` that rises with the heat it releases:
+    ``G = g (1 + u)``, ``u = s z / E``, with one new state ``z`` (the heat released and not yet relaxed,
+    [J]) obeying ``ż = G e² − z/τ`` — the structure of a resistor whose conductance rises with its
+    temperature, ``z = C_th ΔT``.  Written port-Hamiltonian: ``R[i, i] += g`` (the base loss ``g e²``
+    leaves the model at once), ``J[z, i] = g (1 + a) e = −J[i, z]`` (a power-conserving coupling),
+    ``R[z, z] = E (1 + a) / (s τ)`` and the storage ``H_z = (E/s) (a − ln(1 + a) − c₀)`` with
+    ``a = √(u² + δ²)`` (``δ`` = 1e-6, ``c₀`` making ``H_z(0) = 0``): its effort is
+    ``∂H_z/∂z = u / (1 + a)``, so the state loses ``g (1 + a) e · u/(1 + a) = g u e²`` — the
+    conductance's rise — into the heat store, and ``ż = g (1 + a) e² − z/τ``.  ``J`` stays skew, ``R``
+    positive semi-definite (``a ≥ 0``), ``H_z ≥ 0`` (``a − ln(1 + a)`` grows from its minimum at
+    ``a = δ``): passive by construction.  From ``z(0) = 0``, ``z ≥ 0``: the conductance only rises.
 
 Examples
 --------
@@ -31,10 +34,17 @@ Examples
 
 from __future__ import annotations
 
+import math
+
 import sympy as sp
 
 from components.candidates.base import _add_states, _rebuild
 from phs.params import EnergyTerm, Measured, Param, StateInfo
+
+
+DELTA = 1e-6
+"""Smoothing of ``|u|`` in a heat store (``a = √(u² + δ²)``): the conductance's rise is exact, the heat's
+drive ``g (1 + a) e²`` exceeds ``g (1 + u) e²`` by at most ``δ g e²``."""
 
 
 def scale_input(system, input_name: str, gain: sp.Expr, params, effect: str):
@@ -85,8 +95,8 @@ def correct_measured(system, output: str, correction: sp.Expr, params, effect: s
 
 def add_heated_dissipation(system, state: str, conductance: sp.Expr, heat: StateInfo, sensitivity: Param, tau: Param, energy: sp.Expr,
                            params, effect: str, label: str = ""):
-    """``system`` with a dissipation ``conductance`` on ``state``'s effort that rises with the heat it
-    dissipates: the new storage ``heat`` (see the module), of sensitivity ``sensitivity`` (``s``),
+    """``system`` with a dissipation ``conductance`` (``g``) on ``state``'s effort that rises with the heat
+    it releases: the new state ``heat`` (see the module), of sensitivity ``sensitivity`` (``s``),
     relaxation time ``tau`` and energy scale ``energy`` (``E``); ``params`` are the new parameters.
 
     Returns
@@ -109,12 +119,16 @@ def add_heated_dissipation(system, state: str, conductance: sp.Expr, heat: State
     i = system.state_names.index(state)
     e = system.grad_H[i]
     label = label or f"{effect}@{state}"
+    s_, E = sensitivity.symbol, energy
+    u = s_ * heat.symbol / E
+    a = sp.sqrt(u**2 + sp.Float(DELTA) ** 2)
+    c0 = sp.Float(DELTA - math.log1p(DELTA))
     J = sp.zeros(n + 1, n + 1)
     R = sp.zeros(n + 1, n + 1)
-    J[n, i], J[i, n] = conductance * e, -conductance * e
+    J[n, i], J[i, n] = conductance * (1 + a) * e, -conductance * (1 + a) * e
     R[i, i] = conductance
-    relax = energy / (sensitivity.symbol * tau.symbol)
+    relax = E * (1 + a) / (s_ * tau.symbol)
     R[n, n] = relax
-    H = EnergyTerm(f"{label}:heat", sensitivity.symbol * heat.symbol**2 / (2 * energy))
+    H = EnergyTerm(f"{label}:heat", E / s_ * (a - sp.log(1 + a) - c0))
     diss = [(label, {(i, i): conductance}), (f"{label}:heat", {(n, n): relax})]
     return _add_states(system, [heat], [H], J, R, params, diss, effect)

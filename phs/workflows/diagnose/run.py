@@ -191,7 +191,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
 
         if progress:
             print(f"diagnose {system.name}: discovering a correction outside the library", file=sys.stderr, flush=True)
-        found = _discover(current, nominal, data, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+        # the accepted effects' parameters are refitted with the correction (as a second library round
+        # refits them): an effect standing in for part of what the correction models can then give way
+        data_d = replace(data, free=list(dict.fromkeys(list(data.free) + [k for a in accepted for k in a.augmentation.free])))
+        found = _discover(current, nominal, data_d, noise, all_hyps, n_jobs=n_jobs, progress=progress)
     final = found.scored if found is not None and found.found else current
     if final is not current:
         final_findings = _locate(final, final.system, data, noise)

@@ -284,11 +284,11 @@ class Term:
         if self.kind == "memory":
             sens, tau = (float(values.get(k, 0.0)) for k in self.parameters[1:])
             what = "a leakage (conductance across {0})" if self.state in charge_states(system) else "a dissipation on {0}"
-            # steady heat at the typical effort: theta R_s e_s^2 tau; relative rise: sens * that / E
-            rise = sens * theta * tau / self.tau if self.tau > 0 else 0.0
+            # T = sens z / E: the conductance doubles once the heat state holds E / sens
+            doubled = self.heat_scale / sens if sens > 0 else float("inf")
             return (what.format(self.state) + f" that rises with the heat it dissipates (its resistance falls as it heats): an internal "
-                    f"heat state with time constant τ ≈ {tau:.3g} s; in steady state at the typical effort it has risen by "
-                    f"{100 * rise:.0f} %")
+                    f"heat state fed by the power it dissipates, relaxing with time constant τ ≈ {tau:.3g} s; the conductance "
+                    f"doubles once {doubled:.3g} J of heat are held")
         if self.kind == "input":
             verb = "falls" if theta < 0 else "rises"
             return (f"a gain of input {self.state} that {verb} with {_GAIN[self.shape][1].format(via=self.via)} "

@@ -7,8 +7,8 @@ Every decision is taken on the output-error fit of the model, never on different
    nominal free parameters projected out, ``(jᵀr)² / jᵀj`` is the share of the training residual the
    term could remove on its own (to first order); a nonnegative term whose best coefficient is
    negative is dropped;
-2. **forward selection**: the most promising terms are each fitted by output error together with the
-   terms chosen so far and the nominal free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`,
+2. **forward selection**: the most promising terms (and the best heated dissipation, whose screen cannot
+   see its heat) are each fitted by output error together with the terms chosen so far and the nominal free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`,
    loosely); the best by BIC joins when it lowers BIC by :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`,
    lowers the validation residual by :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` and its
    model passes the structural checks (H bounded below on the declared box, R ⪰ 0);
@@ -162,6 +162,17 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     return out
 
 
+def _fitted(ranked, top: int) -> list:
+    """The screened terms fitted at a forward step: the ``top`` best, and the best heated dissipation when
+    it is not among them (its first-order share is that of a constant dissipation: its heat acts at
+    second order in its coefficient, so the screen cannot rank it)."""
+    out = list(ranked[:top])
+    memory = [r for r in ranked[top:] if r[0].kind == "memory"]
+    if memory and not any(r[0].kind == "memory" for r in out):
+        out.append(memory[0])
+    return out
+
+
 def _start(current, chosen) -> dict:
     """The fitted values in ``current`` of every parameter of the ``chosen`` terms."""
     return {n: float(current.values[n]) for t in chosen for n in t.parameters if n in current.values}
@@ -252,7 +263,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         # each fit starts from the chosen terms' values and the new term's first-order coefficient (a
         # coefficient starting at exactly zero gives the solver no scale to move it by)
         augs = [Discovered(chosen + [t], {**start, t.parameter: float(np.clip(c, -1.0, 1.0))}).augment(
-            base.system, (chosen or [t])[0].state, None) for t, _, c in ranked[:top]]
+            base.system, (chosen or [t])[0].state, None) for t, _, c in _fitted(ranked, top)]
         hyps = _run_all(current, augs, data, n_jobs, progress, f"discover step {step + 1}", joint=False)
         ok = sorted([h for h in hyps if h.ok and not h.no_improvement], key=lambda h: h.bic)
         taken = None
