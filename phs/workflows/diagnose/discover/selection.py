@@ -278,7 +278,8 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
                 break
         if taken is None:
             break
-        chosen = [t for t in terms if t.label in taken.augmentation.component.split(" + ")]
+        by_label = {t.label: t for t in terms}  # in the order they were chosen (the heat states' order too)
+        chosen = [by_label[lab] for lab in taken.augmentation.component.split(" + ")]
         current = taken
         if progress:
             print(f"  discover: chose {', '.join(t.label for t in chosen)}", file=sys.stderr, flush=True)
