@@ -35,11 +35,15 @@ Examples
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
 from components.candidates.base import _add_states, _rebuild
 from phs.params import EnergyTerm, Measured, Param, StateInfo
+
+if TYPE_CHECKING:
+    from phs.system import PHSystem
 
 
 DELTA = 1e-6
@@ -47,7 +51,7 @@ DELTA = 1e-6
 drive ``g (1 + a) e²`` exceeds ``g (1 + u) e²`` by at most ``δ g e²``."""
 
 
-def scale_input(system, input_name: str, gain: sp.Expr, params, effect: str):
+def scale_input(system, input_name: str, gain: sp.Expr, params, effect: str) -> PHSystem:
     """``system`` whose input ``input_name`` reaches the model through the gain ``gain`` (an expression of
     the states and parameters): a modulated transformer between the source and the port (see the module).
 
@@ -74,7 +78,7 @@ def scale_input(system, input_name: str, gain: sp.Expr, params, effect: str):
     return _rebuild(system, G=G, P=P, S=S, N=N, params=params, dissipators=diss, effect=effect)
 
 
-def correct_measured(system, output: str, correction: sp.Expr, params, effect: str):
+def correct_measured(system, output: str, correction: sp.Expr, params, effect: str) -> PHSystem:
     """``system`` whose measured output ``output`` reads ``y_m + correction`` (a sensor's error; the
     power ports are unchanged).
 
@@ -94,7 +98,7 @@ def correct_measured(system, output: str, correction: sp.Expr, params, effect: s
 
 
 def add_heated_dissipation(system, state: str, conductance: sp.Expr, heat: StateInfo, sensitivity: Param, tau: Param, energy: sp.Expr,
-                           params, effect: str, label: str = ""):
+                           params, effect: str, label: str = "") -> PHSystem:
     """``system`` with a dissipation ``conductance`` (``g``) on ``state``'s effort that rises with the heat
     it releases: the new state ``heat`` (see the module), of sensitivity ``sensitivity`` (``s``),
     relaxation time ``tau`` and energy scale ``energy`` (``E``); ``params`` are the new parameters.

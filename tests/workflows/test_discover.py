@@ -1,8 +1,8 @@
 """Discovery finds passive corrections the library cannot express, names them and emits them as components.
 
 The recordings come from ``examples/concealed_novel.py``: the electrostatic actuator with a fringe-field
-capacitance, a leakage that heats, a one-sided spring engaging part-way through the stroke, or a stiffness
-softening exponentially with stroke.  Fast tests run the discovery step alone on a short recording; the
+capacitance, a leakage that heats, a one-sided spring engaging part-way through the stroke, a stiffness
+softening exponentially with stroke, or a drive gain falling with stroke.  Fast tests run the discovery step alone on a short recording; the
 whole diagnosis of every case (library and discovery) and the in-library cases run with ``-m slow``
 (and ``bench/discover.py``); Silverbox without the cubic stiffness is in ``test_diagnose_real.py``.
 """
@@ -266,8 +266,9 @@ def test_command_line_writes_the_discovered_component(tmp_path):
 
 # -- slow: whole diagnoses ----------------------------------------------------------------------------------------------
 _HEATING = pytest.param("heating_resistance", marks=pytest.mark.xfail(
-    reason="the library's sensor offset on the current takes 47 % of the truth's gain (20 s run) and no single-state "
-           "term holds the leakage's thermal memory", strict=False))
+    reason="the library accepts a sensor offset on the current first, standing for the leak's mean current with 47 % of the "
+           "truth's gain (20 s run), below the half this test asks of a named library effect; the heated leakage discovered "
+           "after it is checked by test_heating_leakage_discovered_after_the_library", strict=False))
 
 
 @pytest.mark.slow
@@ -282,12 +283,30 @@ def test_diagnosis_of_novel_effects(effect):
     gain = d.nominal.validation_rss - d.final.validation_rss
     if info["nature"] == "conservative":
         assert gain >= 0.7 * truth, d.summary()
-    if not d.accepted:  # then discovery names it
+    if not d.accepted:  # then discovery names it (for an input map: on the input, with the state)
         assert d.effect == "discovered", d.summary()
         assert info["state"] in {x["state"] for x in d.discovery.described}
         assert info["nature"] in {x["nature"] for x in d.discovery.described}
+        if info["input"]:
+            assert info["input"] in {x.get("input") for x in d.discovery.described}
     doc = json.loads(json.dumps(d.to_dict(), default=str))
     assert 0.0 <= doc["verdict"]["explained_share"] <= 1.0
+
+
+@pytest.mark.slow
+def test_heating_leakage_discovered_after_the_library():
+    """The 20 s heating leakage, whole diagnosis: the library's offset, then a leakage with its own heat state."""
+    data, info, vinfo = _data("heating_resistance", 20.0)
+    d = diagnose(electrostatic_actuator(), data.recording, validation=data.validation, free=FREE)
+    truth = truth_gain(d.nominal.validation_rss, data.validation, vinfo["clean"])
+    assert d.discovery is not None and d.discovery.found, d.summary()
+    heated = [t for t in d.discovery.terms if t.kind == "memory"]
+    assert [t.state for t in heated] == [info["state"]], d.summary()
+    assert d.nominal.validation_rss - d.final.validation_rss >= 0.7 * truth, d.summary()
+    assert d.structure_checks()["ok"]
+    # the heat state's time constant: the truth's is R_th C_th = 0.99 s; within a factor 2
+    tau = d.discovery.values[heated[0].parameters[2]]
+    assert 0.5 <= tau <= 2.0, tau
 
 
 @pytest.mark.slow

@@ -16,6 +16,23 @@ Every term is one shape on one state of the fitted model, scaled by that state's
     state's own effort, ``z²``, ``|z|`` of a displacement): ``R`` stays positive semi-definite, the
     added dissipated power ``e² R`` is nonnegative — passive by construction.
 
+``memory``
+    A dissipation with a memory: ``R[i, i] += theta · R_s`` on a momentum or charge whose conductance
+    rises with the heat it releases, held in one new state ``z`` (``ż = G e² − z/τ``,
+    ``G = theta R_s (1 + s z / E)``; :func:`components.candidates.maps.add_heated_dissipation`: a
+    power-conserving coupling into a storage of its own, passive by construction).  Its sensitivity ``s``
+    and time constant ``τ`` are fitted with it (log-scaled).
+``input``
+    A state-dependent gain of an input, ``u → (1 + theta φ(x)) u`` with ``φ`` = ``x²``, ``|x|``, ``x`` of
+    a displacement or charge (scaled): a modulated transformer at the port
+    (:func:`components.candidates.maps.scale_input`), so the conjugate output changes with it and
+    ``yᵀu`` stays the power the model receives; ``theta`` in [-0.9, 3].
+``sensor``
+    A measured output that reads one state (``position = x``) reading it nonlinearly:
+    ``y_m + theta · y_s · φ(x)``, ``φ`` = ``x²``, ``x³`` (:func:`components.candidates.maps.correct_measured`):
+    the sensor, not a power port.  Outputs that are port outputs or mix states (the source current)
+    get none: a correction there could stand in for any missing current.
+
 ``E_s`` (typical co-energy times ``q_s``) and ``R_s`` (typical rate over typical effort) make
 ``theta ~ 1`` an effect of the size of the model's own terms, so every coefficient shares one range.
 
@@ -28,9 +45,9 @@ Examples
 >>> from systems.examples import mass_spring_damper
 >>> from components.candidates import Scales
 >>> s = mass_spring_damper()
->>> terms = dictionary(s, Scales.of(s))
+>>> terms = dictionary(s, Scales.of(s), outputs=["position"])
 >>> sorted({t.kind for t in terms}), terms[0].label
-(['damping', 'energy'], 'k.l:quartic')
+(['damping', 'energy', 'input', 'memory', 'sensor'], 'k.l:quartic')
 """
 
 from __future__ import annotations
@@ -257,7 +274,7 @@ class Term:
         e = system.grad_H[system.state_names.index(self.state)] / sym[f"{EFFECT}.{slug}_effort"]
         return theta * sym[f"{EFFECT}.{slug}_damping"] * shape(self).subs({E: e, X: x})
 
-    def attach(self, system, params: list, scales: dict, new: list):
+    def attach(self, system, params: list, scales: dict, new: list) -> PHSystem:
         """``system`` with the term attached: ``params`` its own (:meth:`params`), ``scales`` the scale
         symbols by name, ``new`` the parameters the new system declares."""
         p = params[0]
@@ -272,7 +289,8 @@ class Term:
         if self.kind == "sensor":
             return correct_measured(system, self.state, expr, new, EFFECT)
         E_h = self.heat_scale
-        heat = StateInfo(self.heat_state, "J", (-1e3 * E_h, 1e3 * E_h), f"heat dissipated on {self.state} not yet relaxed", "C", E_h, EFFECT)
+        heat = StateInfo(self.heat_state, "J", (-1e3 * E_h, 1e3 * E_h), f"heat dissipated on {self.state} not yet relaxed", "C", E_h,
+                         EFFECT)
         return add_heated_dissipation(system, self.state, expr, heat, params[1], params[2], scales[f"{EFFECT}.{_slug(self.state)}_heat"],
                                       new, EFFECT, label)
 

@@ -8,10 +8,11 @@ Every decision is taken on the output-error fit of the model, never on different
    term could remove on its own (to first order); a nonnegative term whose best coefficient is
    negative is dropped;
 2. **forward selection**: the most promising terms (and the best heated dissipation, whose screen cannot
-   see its heat) are each fitted by output error together with the terms chosen so far and the nominal free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`,
-   loosely); the best by BIC joins when it lowers BIC by :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`,
-   lowers the validation residual by :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` and its
-   model passes the structural checks (H bounded below on the declared box, R ⪰ 0);
+   see its heat) are each fitted by output error together with the terms chosen so far and the nominal
+   free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`, loosely); the best by BIC
+   joins when it lowers BIC by :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`, lowers the
+   validation residual by :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` and its model passes
+   the structural checks (H bounded below on the declared box, R ⪰ 0);
 3. **refit**: the chosen terms and the nominal free parameters to convergence, never ending worse than
    the model before it.
 """
