@@ -221,6 +221,22 @@ def test_discovery_does_not_run_when_a_library_effect_explains_the_residual():
     assert forced.effect == "offset" and forced.discovery is not None
 
 
+def test_a_correction_leads_only_where_the_library_explains_little():
+    from types import SimpleNamespace as NS
+
+    from phs.workflows.diagnose.discover import amend_verdict
+
+    found = NS(found=True, share=0.9, text="Discovered correction: a heated leakage.", to_dict=lambda: {"found": True})
+    lib = {"effect": "offset", "effects": ["offset"], "explanation": "Offset.", "confidence": 0.8, "failed": []}
+    led = amend_verdict(lib, found, 1.0, library_share=0.47)
+    assert led["effect"] == "discovered" and led["effects"] == ["discovered", "offset"] and led["confidence"] == 0.95
+    assert led["explanation"].startswith("Discovered correction") and "47 %" in led["explanation"]
+    # the library explains half or more, or the correction explains less than half of the rest: the library leads
+    for share, extra in ((0.5, 0.9), (0.3, 0.4)):
+        kept = amend_verdict(lib, NS(**{**vars(found), "share": extra}), 1.0, library_share=share)
+        assert kept["effect"] == "offset" and kept["effects"] == ["offset", "discovered"] and kept["confidence"] == 0.8
+
+
 def test_command_line_discover_flags(tmp_path):
     from phs.workflows.cli import build_parser
 
@@ -300,6 +316,8 @@ def test_heating_leakage_discovered_after_the_library():
     d = diagnose(electrostatic_actuator(), data.recording, validation=data.validation, free=FREE)
     truth = truth_gain(d.nominal.validation_rss, data.validation, vinfo["clean"])
     assert d.discovery is not None and d.discovery.found, d.summary()
+    # the offset explains less than half and the heated leakage most of the rest: the correction leads
+    assert d.effect == "discovered" and d.verdict["effects"][1:] == [h.augmentation.effect for h in d.accepted], d.summary()
     heated = [t for t in d.discovery.terms if t.kind == "memory"]
     assert [t.state for t in heated] == [info["state"]], d.summary()
     assert d.nominal.validation_rss - d.final.validation_rss >= 0.7 * truth, d.summary()

@@ -203,7 +203,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     if found is not None:
         from phs.workflows.diagnose.discover import amend_verdict
 
-        verdict = amend_verdict(verdict, found, FAILED_FACTOR ** len(verdict["failed"]))
+        library_share = explained_share(nominal, current, data, noise) if accepted else None
+        verdict = amend_verdict(verdict, found, FAILED_FACTOR ** len(verdict["failed"]), library_share, DISCOVER_BELOW)
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)
