@@ -22,6 +22,11 @@ softening_stiffness
     A suspension stiffness that softens exponentially with stroke: an extra stiffness
     ``k_e exp(-|x| / x_e)`` beside the linear ``k``, energy ``k_e x_e² (exp(-|x|/x_e) - 1 + |x|/x_e)``.
     Conservative, on ``x``.
+drive_gain
+    The drive's gain falls with stroke: the source reaches the electrodes through a ratio
+    ``κ(x) = 1 / (1 + (x / x_g)²)`` (``x_g`` = 20 um: 0.86 at the largest closure, about 8 um), a
+    modulated transformer (:func:`components.candidates.maps.scale_input`), so the source current
+    recorded is ``κ`` times the electrodes' current.  An input map, on ``U``, depending on ``x``.
 
 :func:`generate` returns a :class:`phs.workflows.recording.Recording` and what the truth was, with the
 noise-free channels (so a test can compute the truth's own validation-fit gain).
@@ -52,17 +57,20 @@ else:  # run as a script: the modules beside this file
     from concealed_effects import CHANNELS, NOISE, NOMINAL_FREE, program, simulate_truth
     from concealed_truths import BASE, C_GAP, Truth, _build
 
-NOVEL = ("fringe_field", "heating_resistance", "engaging_spring", "softening_stiffness")
+NOVEL = ("fringe_field", "heating_resistance", "engaging_spring", "softening_stiffness", "drive_gain")
 """The cases, none of which a library candidate expresses."""
 SIZES = {
     "fringe_field": {"f": 0.3},
     "heating_resistance": {"G0": 1.5e-10, "alpha": 1.0, "C_th": 3.3e-8, "R_th": 3e7},
     "engaging_spring": {"k_c": 30.0, "x_c": 6e-6, "w": 3e-7},
     "softening_stiffness": {"k_e": 20.0, "x_e": 4e-6},
+    "drive_gain": {"x_g": 2e-5},
 }
 NATURE = {"fringe_field": ("conservative", "Q"), "heating_resistance": ("dissipative", "Q"),
-          "engaging_spring": ("conservative", "x"), "softening_stiffness": ("conservative", "x")}
-"""What discovery should say: conservative or dissipative, and on which state."""
+          "engaging_spring": ("conservative", "x"), "softening_stiffness": ("conservative", "x"), "drive_gain": ("input map", "x")}
+"""What discovery should say: conservative, dissipative or an input map, and on (or, for an input map, with) which state."""
+INPUT = {"drive_gain": "U"}
+"""The input whose map an input-map case changes."""
 
 
 def truth(effect: str, size: float = 1.0) -> Truth:
@@ -103,6 +111,15 @@ def truth(effect: str, size: float = 1.0) -> Truth:
             return {"components": [Potential("stop", K.symbol * sp_**2 / 2, params=[K])]}
         return Truth(effect, _build("truth_engaging_spring", part), "one-sided spring engaging at x_c: F = k_c softplus_w(x - x_c)",
                      {"k_c": kc, "x_c": xc, "w": w})
+    if effect == "drive_gain":
+        from components.candidates.maps import scale_input
+
+        xg = v["x_g"] / size
+        X = Param("x_g", xg, "m", "stroke at which the drive's gain has fallen to one half")
+        base = _build("truth_drive_gain")
+        x = base.states[base.state_names.index("x")].symbol
+        return Truth(effect, scale_input(base, "U", 1 / (1 + (x / X.symbol) ** 2), [X], "drive_gain"),
+                     "drive gain falling with stroke: U reaches the electrodes as U / (1 + (x/x_g)^2)", {"x_g": xg})
     ke, xe = v["k_e"] * size, v["x_e"]
 
     def part(S):
@@ -149,7 +166,7 @@ def generate(effect: str, *, seconds: float = 20.0, seed: int = 0, validation: b
     -------
     (Recording, dict)
         Signals ``U``, ``position``, ``current``; ``info``: ``effect``, ``form``, ``parameters``,
-        ``nature`` and ``state`` (what discovery should name), ``noise_std``, ``clean``, ``nominal_free``.
+        ``nature``, ``state`` and ``input`` (what discovery should name), ``noise_std``, ``clean``, ``nominal_free``.
     """
     from phs.workflows.recording import Recording
 
@@ -165,6 +182,7 @@ def generate(effect: str, *, seconds: float = 20.0, seed: int = 0, validation: b
                                 units={"U": "V", "position": "m", "current": "A"})
     nature, state = NATURE[effect]
     return rec, {"effect": effect, "form": tr.form, "parameters": dict(tr.parameters), "nature": nature, "state": state,
+                 "input": INPUT.get(effect, ""),
                  "noise_std": noise_std, "clean": clean, "nominal_free": list(NOMINAL_FREE), "seed": int(seed),
                  "seconds": float(seconds), "validation": bool(validation)}
 

@@ -48,6 +48,10 @@ The modules, one physical domain each (imports run downward: the effects import 
     the port-Hamiltonian input.
 :mod:`components.candidates.sensor`
     Offset: effects on a measured output.
+:mod:`components.candidates.maps`
+    Building blocks that keep a model port-Hamiltonian while changing an input's gain with the state
+    (a modulated transformer), correcting a measured output, or giving a dissipation its own heat
+    state: what discovered corrections are made of.
 :mod:`components.candidates.library`
     :data:`LIBRARY` (the built-in candidates in the order diagnosis tries them), :data:`EFFECTS` and
     :func:`lookup` by effect name.

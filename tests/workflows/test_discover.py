@@ -1,8 +1,8 @@
 """Discovery finds passive corrections the library cannot express, names them and emits them as components.
 
 The recordings come from ``examples/concealed_novel.py``: the electrostatic actuator with a fringe-field
-capacitance, a leakage that heats, a one-sided spring engaging part-way through the stroke, or a stiffness
-softening exponentially with stroke.  Fast tests run the discovery step alone on a short recording; the
+capacitance, a leakage that heats, a one-sided spring engaging part-way through the stroke, a stiffness
+softening exponentially with stroke, or a drive gain falling with stroke.  Fast tests run the discovery step alone on a short recording; the
 whole diagnosis of every case (library and discovery) and the in-library cases run with ``-m slow``
 (and ``bench/discover.py``); Silverbox without the cubic stiffness is in ``test_diagnose_real.py``.
 """
@@ -19,7 +19,7 @@ from examples.concealed_novel import NOVEL, generate, truth_gain
 from phs.errors import InputDataError, PHSError
 from phs.workflows.cli import main
 from phs.workflows.diagnose import diagnose, noise_level
-from phs.workflows.diagnose.discover import Discovered, dictionary, discover, source
+from phs.workflows.diagnose.discover import Discovered, describe, dictionary, discover, select, source
 from phs.workflows.diagnose.hypotheses import Data, _simulate
 from phs.workflows.diagnose.nominal import fit_nominal
 from systems.electrostatic_actuator import electrostatic_actuator
@@ -46,15 +46,64 @@ def test_every_dictionary_term_is_passive_at_its_bounds():
     from components.candidates import Scales
 
     s = electrostatic_actuator()
-    terms = dictionary(s, Scales.of(s))
-    assert {t.kind for t in terms} == {"energy", "damping"} and len(terms) > 15
+    terms = dictionary(s, Scales.of(s), outputs=["position", "current"])
+    assert {t.kind for t in terms} == {"energy", "damping", "memory", "input", "sensor"} and len(terms) > 15
+    # sensor terms only on an output that reads one state (the position), never on the source current
+    assert {t.state for t in terms if t.kind == "sensor"} == {"position"}
     for t in terms:
         # nonnegative terms (growing energies, every dissipation) at their largest coefficient; signed
-        # energies at a typical one of either sign (the fit keeps them only where H stays bounded below)
-        for theta in ((-1.0, 1.0) if t.signed else (t.bounds()[1],)):
+        # energies at a typical one of either sign (the fit keeps them only where H stays bounded below);
+        # input gains at both ends of their range
+        thetas = t.bounds() if t.kind == "input" else (-1.0, 1.0) if t.signed else (t.bounds()[1],)
+        for theta in thetas:
             aug = Discovered([t]).augment(s, t.state, None)
-            report = aug.system.with_params({t.parameter: theta}).check(samples=50)
+            values = {t.parameter: theta}
+            if t.kind == "memory":  # the heat state's sensitivity and time constant at their bounds too
+                values.update({p.name: p.range[1] for p in t.params()[1:]})
+            report = aug.system.with_params(values).check(samples=50)
             assert report.ok, (t.label, theta, str(report))
+
+
+def test_heat_state_and_input_gain_keep_the_energy_balance():
+    """A heated leakage and a drive gain on the actuator: the power balance closes, the heat follows its
+    law, and the heat store receives exactly the extra power the network loses to the rise of the conductance."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from codegen import Simulator, simulate
+    from components.candidates import Scales
+    from examples.concealed_effects import program
+
+    s = electrostatic_actuator()
+    t, U = program("none", 1.0)
+    nominal = simulate(s, t, u={"U": U})
+    X = np.column_stack([nominal[n] for n in s.state_names])
+    terms = {t_.label: t_ for t_ in dictionary(s, Scales.of(s, t, X, U[:, None]))}
+    mem, gain = terms["Q:heated"], terms["U:gain_square(x)"]
+    start = {mem.parameter: 1.0, mem.parameters[1]: 3.0, mem.parameters[2]: 0.05, gain.parameter: -0.3}
+    system = Discovered([mem, gain], start).augment(s, "Q", None).system
+    assert system.check().ok
+    res = Simulator(system, energy=True).run(t, u={"U": U})
+    H, q = np.asarray(res.H), res.quadratures
+    # whole balance: H(T) - H(0) = supplied - dissipated, to the quadrature's accuracy (1e-4 of the supplied energy)
+    assert abs((H[-1] - H[0]) - (q["E_supplied"][-1] - q["E_dissipated"][-1])) <= 1e-4 * q["E_supplied"][-1]
+    v = {p.name: p.value for p in system.params}
+    z, Q, x = (np.asarray(res[n]) for n in (mem.heat_state, "Q", "x"))
+    V = Q * (v["g0"] - x) / (v["eps"] * v["A"])
+    g = v[mem.parameter] * v["discovered.Q_damping"]
+    s_, E, tau = v[mem.parameters[1]], v["discovered.Q_heat"], v[mem.parameters[2]]
+    u = s_ * z / E
+    assert z.min() >= -1e-12 * z.max() and u.max() > 0.5  # the heat never goes negative; the rise is large enough to matter
+    # the heat law, integrated independently on the 1 kHz grid (trapezoid: 1e-3 relative):
+    # z(T) = ∫ G V² − z/τ with the conductance G = g (1 + s z / E)
+    law = cumulative_trapezoid(g * (1 + u) * V**2 - z / tau, t)[-1]
+    assert z[-1] == pytest.approx(law, rel=1e-3)
+    # the power g u V² the network loses to the conductance's rise is what the heat store holds plus
+    # what it has released (H_z = (E/s)(a − ln(1 + a)) − its value at 0, a = √(u² + δ²))
+    into = cumulative_trapezoid(g * u * V**2, t)[-1]
+    a = np.sqrt(u[-1] ** 2 + 1e-12)
+    H_z = E / s_ * (a - np.log1p(a) - (1e-6 - np.log1p(1e-6)))
+    assert H_z + q["E_dissipated[discovered@Q:heated:heat]"][-1] == pytest.approx(into, rel=1e-3)
+    assert q["E_dissipated[discovered@Q:heated]"][-1] == pytest.approx(cumulative_trapezoid(g * V**2, t)[-1], rel=1e-3)
 
 
 def test_discovery_recovers_a_softening_stiffness(softening):
@@ -88,6 +137,69 @@ def test_emitted_source_imports_and_reproduces_the_fitted_model(softening, tmp_p
         assert np.max(np.abs(np.asarray(sim[ch]) - ref)) <= 1e-6 * np.max(np.abs(ref)), ch
 
 
+@pytest.fixture(scope="module")
+def heating():
+    """One discovered term on the heating-leakage case (2 s recordings)."""
+    data, info, vinfo = _data("heating_resistance", 2.0)
+    nominal, data = fit_nominal(electrostatic_actuator(), data)
+    return select(nominal, data, max_terms=1), nominal, data, info, vinfo
+
+
+def test_discovery_gives_the_heating_leakage_a_heat_state(heating):
+    d, nominal, data, info, vinfo = heating
+    assert d.found, d.reason
+    (term,) = d.terms
+    assert (term.kind, term.state) == ("memory", info["state"])
+    # a single memoryless dissipation on Q recovers 0.68 of the truth's gain here (measured); the heat state 0.8
+    gain = nominal.validation_rss - d.scored.validation_rss
+    assert gain >= 0.75 * truth_gain(nominal.validation_rss, data.validation, vinfo["clean"])
+    (said,) = describe(d.terms, d.values, nominal.system)
+    assert said["nature"] == info["nature"] and said["memory"]["state"] == term.heat_state
+    assert "rises with the heat it dissipates" in said["words"] and "τ ≈" in said["words"]
+    assert d.scored.system.check().ok
+
+
+def _load(path):
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod, next(v for k, v in vars(mod).items() if k.startswith("Discovered") and isinstance(v, type))
+
+
+def test_emitted_source_with_a_heat_state_reproduces_the_fitted_model(heating, tmp_path):
+    d, _, data, _, _ = heating
+    path = tmp_path / "heated_actuator.py"
+    path.write_text(source(d, "A heated leakage."))
+    mod, cls = _load(path)
+    aug = cls().augment(electrostatic_actuator().with_params(mod.FITTED), "Q", None)
+    assert aug.system.check().ok and aug.x0 == {d.terms[0].heat_state: 0.0}
+    assert set(aug.free) == set(d.values)
+    sim = _simulate(aug.system.with_params(d.values), data.validation, d.scored.x0)
+    for ch in data.outputs:  # the same model: agreement to the integrator's tolerance
+        ref = np.asarray(d.scored.simulated["validation"][ch])
+        assert np.max(np.abs(np.asarray(sim[ch]) - ref)) <= 1e-6 * np.max(np.abs(ref)), ch
+
+
+def test_discovery_finds_a_drive_gain_falling_with_stroke():
+    data, info, vinfo = _data("drive_gain", 2.0)
+    nominal, data = fit_nominal(electrostatic_actuator(), data)
+    d = select(nominal, data, max_terms=1)
+    assert d.found, d.reason
+    (term,) = d.terms
+    assert (term.kind, term.state, term.via) == ("input", info["input"], info["state"])
+    gain = nominal.validation_rss - d.scored.validation_rss
+    assert gain >= 0.9 * truth_gain(nominal.validation_rss, data.validation, vinfo["clean"])
+    # the gain at the largest stroke of the fit x_s: 1 + theta (the shape is 1 there) against the truth's
+    # 1 / (1 + (x_s / x_g)²); a parabola fitted to that rational curve over the stroke is off by a few
+    # per cent of the drop at its end, hence 0.03
+    truth = 1 / (1 + (term.q_s / info["parameters"]["x_g"]) ** 2)
+    assert 1 + d.values[term.parameter] == pytest.approx(truth, abs=0.03)
+    (said,) = describe(d.terms, d.values, nominal.system)
+    assert said["nature"] == "input map" and said["input"] == "U" and "falls with x²" in said["words"]
+    aug = d.scored.system
+    assert aug.check().ok and aug.J == nominal.system.J and aug.R == nominal.system.R
+
+
 def test_discovery_does_not_run_when_a_library_effect_explains_the_residual():
     from codegen import simulate
     from components.candidates import Leakage, Offset
@@ -107,6 +219,22 @@ def test_discovery_does_not_run_when_a_library_effect_explains_the_residual():
         d.discovered_source()
     forced = diagnose(rc_circuit(), rec, free=["R.R"], n_jobs=1, candidates=library, discover=True)
     assert forced.effect == "offset" and forced.discovery is not None
+
+
+def test_a_correction_leads_only_where_the_library_explains_little():
+    from types import SimpleNamespace as NS
+
+    from phs.workflows.diagnose.discover import amend_verdict
+
+    found = NS(found=True, share=0.9, text="Discovered correction: a heated leakage.", to_dict=lambda: {"found": True})
+    lib = {"effect": "offset", "effects": ["offset"], "explanation": "Offset.", "confidence": 0.8, "failed": []}
+    led = amend_verdict(lib, found, 1.0, library_share=0.47)
+    assert led["effect"] == "discovered" and led["effects"] == ["discovered", "offset"] and led["confidence"] == 0.95
+    assert led["explanation"].startswith("Discovered correction") and "47 %" in led["explanation"]
+    # the library explains half or more, or the correction explains less than half of the rest: the library leads
+    for share, extra in ((0.5, 0.9), (0.3, 0.4)):
+        kept = amend_verdict(lib, NS(**{**vars(found), "share": extra}), 1.0, library_share=share)
+        assert kept["effect"] == "offset" and kept["effects"] == ["offset", "discovered"] and kept["confidence"] == 0.8
 
 
 def test_command_line_discover_flags(tmp_path):
@@ -154,8 +282,9 @@ def test_command_line_writes_the_discovered_component(tmp_path):
 
 # -- slow: whole diagnoses ----------------------------------------------------------------------------------------------
 _HEATING = pytest.param("heating_resistance", marks=pytest.mark.xfail(
-    reason="the library's sensor offset on the current takes 47 % of the truth's gain (20 s run) and no single-state "
-           "term holds the leakage's thermal memory", strict=False))
+    reason="the library accepts a sensor offset on the current first, standing for the leak's mean current with 47 % of the "
+           "truth's gain (20 s run), below the half this test asks of a named library effect; the heated leakage discovered "
+           "after it is checked by test_heating_leakage_discovered_after_the_library", strict=False))
 
 
 @pytest.mark.slow
@@ -170,12 +299,32 @@ def test_diagnosis_of_novel_effects(effect):
     gain = d.nominal.validation_rss - d.final.validation_rss
     if info["nature"] == "conservative":
         assert gain >= 0.7 * truth, d.summary()
-    if not d.accepted:  # then discovery names it
+    if not d.accepted:  # then discovery names it (for an input map: on the input, with the state)
         assert d.effect == "discovered", d.summary()
         assert info["state"] in {x["state"] for x in d.discovery.described}
         assert info["nature"] in {x["nature"] for x in d.discovery.described}
+        if info["input"]:
+            assert info["input"] in {x.get("input") for x in d.discovery.described}
     doc = json.loads(json.dumps(d.to_dict(), default=str))
     assert 0.0 <= doc["verdict"]["explained_share"] <= 1.0
+
+
+@pytest.mark.slow
+def test_heating_leakage_discovered_after_the_library():
+    """The 20 s heating leakage, whole diagnosis: the library's offset, then a leakage with its own heat state."""
+    data, info, vinfo = _data("heating_resistance", 20.0)
+    d = diagnose(electrostatic_actuator(), data.recording, validation=data.validation, free=FREE)
+    truth = truth_gain(d.nominal.validation_rss, data.validation, vinfo["clean"])
+    assert d.discovery is not None and d.discovery.found, d.summary()
+    # the offset explains less than half and the heated leakage most of the rest: the correction leads
+    assert d.effect == "discovered" and d.verdict["effects"][1:] == [h.augmentation.effect for h in d.accepted], d.summary()
+    heated = [t for t in d.discovery.terms if t.kind == "memory"]
+    assert [t.state for t in heated] == [info["state"]], d.summary()
+    assert d.nominal.validation_rss - d.final.validation_rss >= 0.7 * truth, d.summary()
+    assert d.structure_checks()["ok"]
+    # the heat state's time constant: the truth's is R_th C_th = 0.99 s; within a factor 2
+    tau = d.discovery.values[heated[0].parameters[2]]
+    assert 0.5 <= tau <= 2.0, tau
 
 
 @pytest.mark.slow

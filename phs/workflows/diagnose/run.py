@@ -192,7 +192,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
 
         if progress:
             print(f"diagnose {system.name}: discovering a correction outside the library", file=sys.stderr, flush=True)
-        found = _discover(current, nominal, data, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+        # the accepted effects' parameters are refitted with the correction (as a second library round
+        # refits them): an effect standing in for part of what the correction models can then give way
+        data_d = replace(data, free=list(dict.fromkeys(list(data.free) + [k for a in accepted for k in a.augmentation.free])))
+        found = _discover(current, nominal, data_d, noise, all_hyps, n_jobs=n_jobs, progress=progress)
     final = found.scored if found is not None and found.found else current
     if final is not current:
         final_findings = _locate(final, final.system, data, noise)
@@ -201,7 +204,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     if found is not None:
         from phs.workflows.diagnose.discover import amend_verdict
 
-        verdict = amend_verdict(verdict, found, FAILED_FACTOR ** len(verdict["failed"]))
+        library_share = explained_share(nominal, current, data, noise) if accepted else None
+        verdict = amend_verdict(verdict, found, FAILED_FACTOR ** len(verdict["failed"]), library_share, DISCOVER_BELOW)
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)

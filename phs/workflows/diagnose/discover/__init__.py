@@ -52,11 +52,16 @@ def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int 
     return d
 
 
-def amend_verdict(verdict: dict, discovery, scale: float = 1.0) -> dict:
+def amend_verdict(verdict: dict, discovery, scale: float = 1.0, library_share: float | None = None, lead_below: float = 0.5) -> dict:
     """The verdict with the discovered correction: effect ``discovered`` when no library effect was
     accepted, ``discovered`` appended to ``effects``, its paragraph appended to the explanation and
     ``verdict["discovered"]`` (see :meth:`Discovery.to_dict`).  A verdict led by the correction has
     confidence ``0.5 + 0.5 × explained share`` (times ``scale``, the failed hypotheses' factor).
+
+    When library effects were accepted but explain less than ``lead_below`` of the mismatch
+    (``library_share``) and the correction explains at least ``lead_below`` of what they leave, the
+    correction leads: effect ``discovered``, then the library effects (they stay in the model, refitted
+    with it).
 
     Examples
     --------
@@ -67,6 +72,7 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0) -> dict:
     if discovery is None or not discovery.found:
         return verdict
     out = dict(verdict)
+    leads = verdict["effect"] != "none" and library_share is not None and library_share < lead_below <= discovery.share
     if verdict["effect"] == "none":
         out["effect"] = "discovered"
         library = (verdict["explanation"]
@@ -75,9 +81,14 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0) -> dict:
                    .replace("No candidate could be fitted; the nominal model stands.", "No library candidate could be fitted."))
         out["explanation"] = discovery.text + " " + library
         out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)
+    elif leads:
+        out["effect"] = "discovered"
+        out["explanation"] = (discovery.text + f" It leads the verdict: the library's effects explain {100 * library_share:.0f} % of "
+                              "the mismatch and stay in the model, refitted with it. " + verdict["explanation"])
+        out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)
     else:
         out["explanation"] = verdict["explanation"] + " " + discovery.text
-    out["effects"] = list(verdict["effects"]) + ["discovered"]
+    out["effects"] = (["discovered"] + list(verdict["effects"])) if leads else (list(verdict["effects"]) + ["discovered"])
     out["discovered"] = discovery.to_dict()
     return out
 

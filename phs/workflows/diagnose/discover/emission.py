@@ -16,6 +16,9 @@ from phs.io import write_atomic
 from phs.workflows.diagnose.discover.dictionary import EFFECT, C, Discovered, _slug, shape
 
 _FUNCTIONS = ("cosh", "exp", "log", "sqrt")
+_WHAT = {"energy": "an added energy", "damping": "an added dissipation R >= 0",
+         "memory": "a dissipation R >= 0 with its own heat state (fed by the power it dissipates)",
+         "input": "a state-dependent input gain (a modulated transformer)", "sensor": "a correction of a measured output"}
 
 
 def _class_name(system_name: str) -> str:
@@ -55,28 +58,44 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
     name = _class_name(base.name)
     fitted = {k: float(v) for k, v in h.values.items() if k in base.param_names}
     body = []
+    index = {p.name: k for k, p in enumerate(thetas)}
     for k, t in enumerate(terms):
         expr = shape(t).subs({C: t.c}) if t.shape.startswith("engage") else shape(t)
-        new = f"[theta[{k}]]" + (" + scale" if k == 0 else "")
-        sym = {key: repr(f"{EFFECT}.{_slug(n)}_{key}") for key, n in (("scale", t.state), ("energy", t.state), ("effort", t.state),
-                                                                         ("damping", t.state), ("via", t.via))}
+        own = [f"theta[{index[n]}]" for n in t.parameters]
+        new = f"[{', '.join(own)}]" + (" + scale" if k == 0 else "")
+        th = f"theta[{index[t.parameter]}].symbol"
+        sym = {key: repr(f"{EFFECT}.{_slug(t.state)}_{key}") for key in ("scale", "energy", "effort", "damping", "heat", "level")}
         sym["via"] = repr(f"{EFFECT}.{_slug(t.via)}_scale")
-        body.append(f"        # {t.label}: {'an added energy' if t.kind == 'energy' else 'an added dissipation R >= 0'}")
-        if t.kind == "energy":
-            body.append(f"        z = state({t.state!r}) / S[{sym['scale']}]")
-        else:
-            body.append(f"        e = s.grad_H[s.state_names.index({t.state!r})] / S[{sym['effort']}]")
+        body.append(f"        # {t.label}: {_WHAT[t.kind]}")
         if t.via:
             body.append(f"        x = state({t.via!r}) / S[{sym['via']}]")
         if t.kind == "energy":
-            body.append(f"        term = theta[{k}].symbol * S[{sym['energy']}] * ({expr})")
+            body.append(f"        z = state({t.state!r}) / S[{sym['scale']}]")
+            body.append(f"        term = {th} * S[{sym['energy']}] * ({expr})")
             body.append(f"        s = add_energy(s, {f'{EFFECT}@{t.label}'!r}, term, {new}, self.effect)")
-        else:
-            body.append(f"        term = theta[{k}].symbol * S[{sym['damping']}] * ({expr})")
+        elif t.kind == "damping":
+            body.append(f"        e = s.grad_H[s.state_names.index({t.state!r})] / S[{sym['effort']}]")
+            body.append(f"        term = {th} * S[{sym['damping']}] * ({expr})")
             body.append(f"        s = add_damping(s, {t.state!r}, term, {new}, {f'{EFFECT}.{k}'!r})")
+        elif t.kind == "input":
+            body.append(f"        s = scale_input(s, {t.state!r}, 1 + {th} * ({expr}), {new}, self.effect)")
+        elif t.kind == "sensor":
+            body.append(f"        s = correct_measured(s, {t.state!r}, {th} * S[{sym['level']}] * ({expr}), {new}, self.effect)")
+        else:
+            E_h = t.heat_scale
+            body.append(f"        heat = StateInfo({t.heat_state!r}, 'J', ({-1e3 * E_h!r}, {1e3 * E_h!r}), "
+                        f"{f'heat dissipated on {t.state} not yet relaxed'!r}, 'C', {E_h!r}, self.effect)")
+            body.append(f"        s = add_heated_dissipation(s, {t.state!r}, {th} * S[{sym['damping']}], heat, {own[1]}, {own[2]}, "
+                        f"S[{sym['heat']}], {new}, self.effect, {f'{EFFECT}@{t.label}'!r})")
     text = "\n".join(body)
     used = [f for f in _FUNCTIONS if re.search(rf"\b{f}\(", text)]
-    neutral = {p.name: (0.0 if not p.positive else p.range[0]) for p in thetas}
+    main = {t.parameter for t in terms}
+    neutral = {p.name: (0.0 if not p.positive else p.range[0]) for p in thetas if p.name in main}
+    memory = [t for t in terms if t.kind == "memory"]
+    log = [n for t in memory for n in t.parameters[1:]]
+    x0 = {t.heat_state: 0.0 for t in memory}
+    blocks = [b for b, kind in (("add_heated_dissipation", "memory"), ("correct_measured", "sensor"), ("scale_input", "input"))
+              if any(t.kind == kind for t in terms)]
     lines = [
         f'"""{name}: a correction of {base.name!r} discovered by diagnosis.',
         "",
@@ -84,7 +103,7 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         "",
         "Terms (coefficients in units of the state's scale along the fit):",
         "",
-        *[f"* ``{t.label}`` ({t.kind}): {p.name} = {p.value:.6g}" for t, p in zip(terms, thetas, strict=True)],
+        *[f"* ``{t.label}`` ({t.kind}): " + ", ".join(f"{n} = {discovery.values[n]:.6g}" for n in t.parameters) for t in terms],
         "",
         *([f"It explains {100 * share:.0f} % of what the model it extends misses above the noise floor.", ""] if share is not None else []),
         "``FITTED`` holds the parameters of the model it extends (the diagnosed model with any accepted library effect)",
@@ -96,7 +115,8 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         "",
         *([f"from sympy import {', '.join(used)}", ""] if used else []),
         "from components.candidates import Augmentation, Candidate, add_damping, add_energy",
-        "from phs import Param",
+        *(["from components.candidates.maps import " + ", ".join(blocks)] if blocks else []),
+        "from phs import Param" + (", StateInfo" if memory else ""),
         "",
         f"FITTED = {fitted!r}",
         '"""The diagnosed model\'s parameters as refitted together with the correction."""',
@@ -128,7 +148,7 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         "        s = system",
         text,
         f"        return Augmentation(self.effect, where, {' + '.join(t.label for t in terms)!r}, s, [p.name for p in theta],",
-        f"                            {{p.name: p.range for p in theta}}, [], neutral={neutral!r})",
+        f"                            {{p.name: p.range for p in theta}}, {log!r}, {x0!r}, neutral={neutral!r})",
         "",
     ]
     return "\n".join(lines)

@@ -115,8 +115,10 @@ def resemblance(discovered, base, nominal, hypotheses, data) -> list[tuple[str, 
 
 
 def describe(terms, values: dict, system) -> list[dict]:
-    """Per term: ``term``, ``state``, ``nature`` (``conservative``/``dissipative``), ``parameter``,
-    ``coefficient`` and ``words``.
+    """Per term: ``term``, ``state`` (the state it acts on, or for an input gain or a sensor term the
+    state it depends on), ``nature`` (``conservative``, ``dissipative``, ``input map``, ``sensor``),
+    ``parameter``, ``coefficient`` and ``words``; ``input`` or ``sensor`` (the input or measured output)
+    for those terms, ``memory`` (the heat state's name, ``sensitivity``, ``tau``) for a heated dissipation.
 
     Examples
     --------
@@ -130,11 +132,27 @@ def describe(terms, values: dict, system) -> list[dict]:
     out = []
     for t in terms:
         theta = float(values.get(t.parameter, 0.0))
-        nature = "conservative" if t.kind == "energy" else "dissipative"
-        what = "an added energy" if t.kind == "energy" else "an added dissipation R ≥ 0"
-        out.append({"term": t.label, "state": t.state, "nature": nature, "parameter": t.parameter, "coefficient": theta,
-                    "words": f"{t.words(system, theta)} ({nature}: {what} on {t.state})"})
+        nature, what = _NATURE[t.kind]
+        state = t.via if t.kind in ("input", "sensor") else t.state
+        entry = {"term": t.label, "state": state, "nature": nature, "parameter": t.parameter, "coefficient": theta,
+                 "words": f"{t.words(system, theta, values)} ({nature}: {what.format(t.state)})"}
+        if t.kind in ("input", "sensor"):
+            entry[t.kind] = t.state
+        if t.kind == "memory":
+            entry["memory"] = {"state": t.heat_state, **{n.split(".", 1)[1].split("_", 1)[0]: float(values.get(n, 0.0))
+                                                        for n in t.parameters[1:]}}
+        out.append(entry)
     return out
+
+
+_NATURE = {
+    "energy": ("conservative", "an added energy on {0}"),
+    "damping": ("dissipative", "an added dissipation R ≥ 0 on {0}"),
+    "memory": ("dissipative", "an added dissipation R ≥ 0 on {0} with its own heat storage, fed by the power it dissipates"),
+    "input": ("input map", "a state-dependent gain of input {0}, a modulated transformer at the port"),
+    "sensor": ("sensor", "a correction of the measured output {0}, not of a power port"),
+}
+"""Per term kind: its nature and what it adds (``{0}``: where)."""
 
 
 def sentence(described: list[dict], similar: list[tuple[str, float]], share: float) -> str:

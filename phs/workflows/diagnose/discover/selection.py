@@ -7,11 +7,12 @@ Every decision is taken on the output-error fit of the model, never on different
    nominal free parameters projected out, ``(jᵀr)² / jᵀj`` is the share of the training residual the
    term could remove on its own (to first order); a nonnegative term whose best coefficient is
    negative is dropped;
-2. **forward selection**: the most promising terms are each fitted by output error together with the
-   terms chosen so far and the nominal free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`,
-   loosely); the best by BIC joins when it lowers BIC by :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`,
-   lowers the validation residual by :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` and its
-   model passes the structural checks (H bounded below on the declared box, R ⪰ 0);
+2. **forward selection**: the most promising terms (and the best heated dissipation, whose screen cannot
+   see its heat) are each fitted by output error together with the terms chosen so far and the nominal
+   free parameters (:func:`~phs.workflows.diagnose.hypotheses.fit_augmented`, loosely); the best by BIC
+   joins when it lowers BIC by :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`, lowers the
+   validation residual by :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` and its model passes
+   the structural checks (H bounded below on the declared box, R ⪰ 0);
 3. **refit**: the chosen terms and the nominal free parameters to convergence, never ending worse than
    the model before it.
 """
@@ -78,7 +79,7 @@ class Discovery:
     @property
     def values(self) -> dict:
         """Fitted coefficients by parameter name."""
-        return {t.parameter: float(self.scored.values[t.parameter]) for t in self.terms} if self.found else {}
+        return {n: float(self.scored.values[n]) for t in self.terms for n in t.parameters} if self.found else {}
 
 
 def _trajectory(h, data):
@@ -119,16 +120,17 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     from phs.errors import PHSError
     from phs.workflows.diagnose.hypotheses import _simulate
 
-    start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+    start = _start(current, chosen)
     cand = Discovered(list(chosen) + list(terms), start)
     system = cand.apply(base_system)
     sim = Simulator(system, energy=False)
     p0 = {p.name: p.value for p in cand.params()}
+    x0 = _x0(current, system)
     rec = data.recording
     scale = {ch: float(np.std(rec[ch])) or 1.0 for ch in data.outputs}
 
     def outputs(over):
-        r = _simulate(system, rec, current.x0, params={**p0, **over}, sim=sim)
+        r = _simulate(system, rec, x0, params={**p0, **over}, sim=sim)
         return np.concatenate([np.asarray(r[ch], float) / scale[ch] for ch in data.outputs])
 
     y0 = outputs({})
@@ -161,6 +163,28 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     return out
 
 
+def _fitted(ranked, top: int) -> list:
+    """The screened terms fitted at a forward step: the ``top`` best, and the best heated dissipation when
+    it is not among them (its first-order share is that of a constant dissipation: its heat acts at
+    second order in its coefficient, so the screen cannot rank it)."""
+    out = list(ranked[:top])
+    memory = [r for r in ranked[top:] if r[0].kind == "memory"]
+    if memory and not any(r[0].kind == "memory" for r in out):
+        out.append(memory[0])
+    return out
+
+
+def _start(current, chosen) -> dict:
+    """The fitted values in ``current`` of every parameter of the ``chosen`` terms."""
+    return {n: float(current.values[n]) for t in chosen for n in t.parameters if n in current.values}
+
+
+def _x0(current, system) -> list:
+    """``current``'s initial states, the heat states ``system`` appends after them starting at zero."""
+    x0 = [float(v) for v in current.x0]
+    return x0 + [0.0] * (len(system.states) - len(x0))
+
+
 def _window(data, base):
     """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples (the forward
     selection's fits; validation scores stay on the whole validation recording); ``data`` itself when
@@ -188,7 +212,7 @@ def _refit(current, chosen, base, data, progress, joint=True):
     ``current`` itself when the refit does not end better or fails the structural checks."""
     from phs.workflows.diagnose.screening import _run_all
 
-    start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+    start = _start(current, chosen)
     aug = Discovered(chosen, start).augment(base.system, chosen[0].state, None)
     full = _run_all(current, [aug], data, 1, progress, "discover refit", joint=joint)[0]
     return full if full.ok and not full.no_improvement and full.rss <= current.rss and _passes(full) else current
@@ -226,7 +250,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
 
     wall = time.perf_counter()
     res, traj = _trajectory(base, data)
-    terms = dictionary(base.system, _scales(base, data, res), traj)
+    terms = dictionary(base.system, _scales(base, data, res), traj, outputs=data.outputs)
     out = Discovery(base)
     full_data, data = data, _window(data, base)
     current, chosen = (base if data is full_data else _rescore(base, data)), []
@@ -236,11 +260,11 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
             out.screened = [(t.label, g) for t, g, _ in ranked]
         if not ranked:
             break
-        start = {t.parameter: current.values.get(t.parameter, 0.0) for t in chosen}
+        start = _start(current, chosen)
         # each fit starts from the chosen terms' values and the new term's first-order coefficient (a
         # coefficient starting at exactly zero gives the solver no scale to move it by)
         augs = [Discovered(chosen + [t], {**start, t.parameter: float(np.clip(c, -1.0, 1.0))}).augment(
-            base.system, (chosen or [t])[0].state, None) for t, _, c in ranked[:top]]
+            base.system, (chosen or [t])[0].state, None) for t, _, c in _fitted(ranked, top)]
         hyps = _run_all(current, augs, data, n_jobs, progress, f"discover step {step + 1}", joint=False)
         ok = sorted([h for h in hyps if h.ok and not h.no_improvement], key=lambda h: h.bic)
         taken = None
@@ -255,7 +279,8 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
                 break
         if taken is None:
             break
-        chosen = [t for t in terms if t.label in taken.augmentation.component.split(" + ")]
+        by_label = {t.label: t for t in terms}  # in the order they were chosen (the heat states' order too)
+        chosen = [by_label[lab] for lab in taken.augmentation.component.split(" + ")]
         current = taken
         if progress:
             print(f"  discover: chose {', '.join(t.label for t in chosen)}", file=sys.stderr, flush=True)
