@@ -274,25 +274,16 @@ def test_single_actuator_stroke_stays_below_one_millimetre_under_any_measured_lo
 def test_platform_heave_at_5_kV_is_the_sum_of_the_stages_strokes(platform):
     # all six actuators at 5 kV: each at its single-actuator 5 kV equilibrium under its load share is the platform's
     # rest state, and the end effector rises by the two stages' strokes (no lever in heave): 0.873 + 0.915 mm
-    fun, u, p = generate(platform), np.full(6, 5e3), platform.param_vector()
-    poses = {}
-    for V in (0.0, 5.0):
-        x = np.zeros(len(platform.state_names))
-        for k, plates in ((1, 2), (2, 1)):
-            for j in (1, 2, 3):
-                x[platform.state_names.index(f"s{k}.a{j}.x")] = printed_static_displacement(V, plates * M_PLATE * G / 3) * 1e-3
-        poses[V] = x
-    assert np.max(np.abs(np.asarray(fun.rhs(poses[5.0], u, p)).ravel())) <= 1e-9  # net forces [N], as for the rest
-    ee_z = platform.measured_names.index("ee.z")
-    dz = np.diff([np.asarray(fun.measured(poses[V], u, p)).ravel()[ee_z] for V in (0.0, 5.0)])[0]
-    rise = sum(poses[5.0][:6] - poses[0.0][:6]) / 3
+    dz, residual, rise = _platform_static_heave(platform, 1e-3)
+    assert residual <= 1e-9  # net forces [N], as for the rest
     assert dz == pytest.approx(rise, rel=1e-9) and dz == pytest.approx(1.788e-3, abs=1e-6)
 
 
 # -- the unit of x in the printed fits (fit_length) ----------------------------------------------------------------
 def _platform_static_heave(platform, metres_per_unit):
     """End-effector rise [m] between the static poses at 0 and 5 kV on all six actuators, each actuator at the printed
-    force balance (brentq, x in fit units) under its load share; also the largest net force [N] at the 5 kV pose."""
+    force balance (brentq, x in fit units) under its load share; also the largest net force [N] at the 5 kV pose and
+    the mean rise of the six actuators [m] (the sum of the two stages' strokes)."""
     fun, u, p = generate(platform), np.full(6, 5e3), platform.param_vector()
     poses = {}
     for V in (0.0, 5.0):
@@ -304,7 +295,8 @@ def _platform_static_heave(platform, metres_per_unit):
         poses[V] = x
     ee_z = platform.measured_names.index("ee.z")
     dz = np.diff([np.asarray(fun.measured(poses[V], u, p)).ravel()[ee_z] for V in (0.0, 5.0)])[0]
-    return dz, float(np.max(np.abs(np.asarray(fun.rhs(poses[5.0], u, p)).ravel())))
+    rise = sum(poses[5.0][:6] - poses[0.0][:6]) / 3
+    return dz, float(np.max(np.abs(np.asarray(fun.rhs(poses[5.0], u, p)).ravel()))), rise
 
 
 @pytest.fixture(scope="module")
@@ -393,7 +385,7 @@ def test_mixed_length_units_in_the_fits_are_refused():
 def test_platform_heave_with_the_fits_read_in_cm_is_ten_times_larger():
     platform = hasel_platform(2, fit_length="cm")
     assert platform.name == "hasel_platform2_cm"
-    dz_cm, residual = _platform_static_heave(platform, CM)
+    dz_cm, residual, _ = _platform_static_heave(platform, CM)
     assert residual <= 1e-9  # the static poses are the platform's equilibria at 5 kV (net forces [N], as above)
     rise_mm = sum(printed_static_displacement(5.0, k * M_PLATE * G / 3) - printed_static_displacement(0.0, k * M_PLATE * G / 3)
                   for k in (1, 2)) * 1e-3  # the default reading's heave (1.788 mm), from the printed laws

@@ -56,7 +56,10 @@ def test_silverbox_linear_model_misses_cubic_stiffness():
 @pytest.mark.slow
 def test_silverbox_without_cubic_stiffness_discovers_a_hardening_spring():
     """With the cubic stiffness taken out of the library, discovery finds a hardening spring on the
-    position (measured: a sextic energy, validation fit 80.3 -> 95.1 %, 116 s of which 26 s discovery)."""
+    position.  The library's hysteresis imitates it (a Bouc-Wen loop with eta = -3: validation 80.3 ->
+    92.6 %, 87 % of the mismatch explained) and is accepted; the correction found from the nominal model
+    as its rival, a sextic energy (validation 95.1 %, residual 57 % lower, BIC 20.7 lower), replaces it
+    (measured 69 s under load)."""
     from components.candidates import LIBRARY
 
     raw = _csv("silverbox", "SNLS80mV.csv")
@@ -74,6 +77,8 @@ def test_silverbox_without_cubic_stiffness_discovers_a_hardening_spring():
     assert any(x["term"].split(":")[1] in ("quartic", "sextic", "abs_cubic") and x["coefficient"] > 0 for x in position)
     assert d.structure_checks()["ok"]
     assert d.final.validation_fit_percent["position"] >= d.nominal.validation_fit_percent["position"] + 3.0
+    # the library effect it replaced is named as the one it imitates, and is not in the final model
+    assert d.effect == "discovered" and d.verdict["rival_of"] == "hysteresis" and not d.accepted, d.summary()
 
 
 def test_bouc_wen_linear_model_misses_hysteresis():

@@ -339,3 +339,25 @@ def test_in_library_verdicts_stand(effect):
     assert d.effect == effect, d.summary()
     assert d.discovery is None or d.verdict["effects"][0] == effect
 
+
+
+def test_a_rival_correction_replaces_a_library_effect_only_when_clearly_better():
+    """``_beats``: the correction found from the nominal model must lower the validation residual by
+    RIVAL_MARGIN and the BIC by MIN_BIC_GAIN against the library model; either short of it keeps the
+    library's effect (the Silverbox case, where it replaces an imitating hysteresis, is a slow test in
+    ``test_diagnose_real.py``)."""
+    from types import SimpleNamespace
+
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN
+    from phs.workflows.diagnose.run import RIVAL_MARGIN, _beats
+
+    library = SimpleNamespace(validation_rss=1.0, bic=100.0)
+
+    def rival(vrss, bic, found=True):
+        return SimpleNamespace(found=found, scored=SimpleNamespace(validation_rss=vrss, bic=bic))
+
+    clearly = 1 - RIVAL_MARGIN - 0.01
+    assert _beats(rival(clearly, 100.0 - MIN_BIC_GAIN - 1), library)
+    assert not _beats(rival(1 - RIVAL_MARGIN + 0.01, 100.0 - MIN_BIC_GAIN - 1), library)  # residual not low enough
+    assert not _beats(rival(clearly, 100.0 - MIN_BIC_GAIN + 1), library)  # BIC not low enough
+    assert not _beats(rival(0.1, 0.0, found=False), library) and not _beats(None, library)

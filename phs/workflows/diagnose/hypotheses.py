@@ -31,13 +31,8 @@ SCREEN_STARTS = 2
 """Starts a screening fit runs from: of the default start and the candidate's own starts (parameters
 whose plausible values span decades), the ones with the lowest training cost at their start, one
 simulation each.  The joint refit of the most promising hypotheses starts from the screening's result.
-Measured against screening from every start on the fifteen 3 s concealed cases and the 20 s bench
-cases: ``docs/workflows/diagnose.md``, step 4."""
-
-SCREEN_RTOL = 1e-5
-"""Relative integration tolerance of screening fits (the joint refits and every score use the diagnosis's
-``rtol``): a screening ranks hypotheses by gains of a few per cent against noise of about one per cent of
-each channel, far above an integration error of 1e-5; a looser tolerance takes CVODES fewer steps."""
+Measured against screening from every start on the fourteen 3 s concealed cases:
+``docs/workflows/diagnose.md``, step 4."""
 
 
 @dataclass
@@ -246,7 +241,7 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
             # the estimated initial states are estimated again: a new element changes what start explains the data
             return identify(system.with_params(start) if start else system, data.recording, free,
                             bounds={**(data.bounds or {}), **aug.bounds, **new_bounds}, x0=x0, outputs=data.outputs,
-                            log_scale=log_scale, rtol=_rtol(data, joint), max_iter=max_iter or (30 if joint else SCREEN_ITER),
+                            log_scale=log_scale, rtol=data.rtol, max_iter=max_iter or (30 if joint else SCREEN_ITER),
                             ftol=1e-6 if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0,
                             weights=_fixed(data.weights))
 
@@ -275,7 +270,7 @@ def _promising_starts(system, starts: list, x0: dict, data: Data, keep: int | No
     """The ``keep`` (default :data:`SCREEN_STARTS`) starts with the lowest training cost, each scored by
     one simulation (a start whose simulation fails ranks last), in their given order."""
     keep = SCREEN_STARTS if keep is None else keep
-    sim = Simulator(system, rtol=_rtol(data, False), energy=False)
+    sim = Simulator(system, rtol=data.rtol, energy=False)
     w2 = {ch: weight_squared(data.weights, ch, data.recording[ch]) for ch in data.outputs}
     xs = [x0.get(n, 0.0) for n in system.state_names]
     costs = []
@@ -333,11 +328,6 @@ def neutral_point(nominal: Scored, aug, data: Data) -> Scored:
         warnings.simplefilter("ignore", ParameterRangeWarning)
         return score(label, aug.system, values, [x0.get(n, 0.0) for n in aug.system.state_names], n_params, data,
                      augmentation=aug)
-
-
-def _rtol(data: Data, joint: bool) -> float:
-    """Integration tolerance of a fit: the diagnosis's own, loosened to :data:`SCREEN_RTOL` for screening."""
-    return data.rtol if joint else max(data.rtol, SCREEN_RTOL)
 
 
 def _fixed(weights):
@@ -408,7 +398,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             try:
                 fit = identify(nominal.system.with_params(values), _transformed(rec, el, where, theta), data.free,
                                bounds=data.bounds or None, x0=dict(zip(nominal.system.state_names, map(float, x0), strict=True)),
-                               outputs=outs, log_scale=data.log_scale or None, rtol=_rtol(data, joint),
+                               outputs=outs, log_scale=data.log_scale or None, rtol=data.rtol,
                                max_iter=max_iter or (30 if joint else SCREEN_ITER), ftol=1e-6 if joint else 1e-3,
                                compile=None if joint else False, estimate_x0=data.estimate_x0, weights=_fixed(data.weights))
             except RECOVERABLE as exc:

@@ -128,6 +128,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     if not (weights is None or weights == "ml" or isinstance(weights, dict)):
         raise ParameterError(f"diagnose: weights must be 'ml', None or a dict of channel weights, got {weights!r}")
     nominal, data = fit_nominal(system, data)
+    data0 = data  # the nominal model's data (a rival correction is fitted from the nominal model)
     findings = _locate(nominal, system, data, noise)
     current, accepted, all_hyps, rounds = nominal, [], [], []
     pool = cands
@@ -196,8 +197,22 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         # refits them): an effect standing in for part of what the correction models can then give way
         data_d = replace(data, free=list(dict.fromkeys(list(data.free) + [k for a in accepted for k in a.augmentation.free])))
         found = _discover(current, nominal, data_d, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+    rival = None
+    if found is None and accepted and left and discover is not False:
+        # the accepted library effect explains most of the mismatch but leaves structure: a correction
+        # found from the nominal model competes with it, so that the nearest library effect is not named
+        # as the cause of physics it only imitates
+        from phs.workflows.diagnose.discover import discover as _discover
+
+        if progress:
+            print(f"diagnose {system.name}: a correction outside the library as the accepted effect's rival", file=sys.stderr, flush=True)
+        found = _discover(nominal, nominal, data0, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+        if _beats(found, current):
+            rival, current, accepted, data = found, nominal, [], data0
+        else:
+            found = None
     final = found.scored if found is not None and found.found else current
-    if final is not current:
+    if final is not current or rival is not None:
         final_findings = _locate(final, final.system, data, noise)
     failed = [h for r in rounds for h in r if not h.ok]
     verdict = _verdict(nominal, accepted, all_hyps, findings, outs, failed)
@@ -206,6 +221,12 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
 
         library_share = explained_share(nominal, current, data, noise) if accepted else None
         verdict = amend_verdict(verdict, found, FAILED_FACTOR ** len(verdict["failed"]), library_share, DISCOVER_BELOW)
+    if rival is not None:
+        best = rounds[0][0] if rounds and rounds[0] else None
+        verdict["explanation"] = (rival.text + " " + (f"It explains the recording better than the library's best, {best.label} "
+                                  f"(validation residual {100 * (1 - rival.scored.validation_rss / best.validation_rss):.0f} % lower, "
+                                  f"BIC {rival.scored.bic - best.bic:+.1f}), which only imitates it." if best is not None else ""))
+        verdict["rival_of"] = best.augmentation.effect if best is not None else None
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)
@@ -216,6 +237,23 @@ DISCOVER_BELOW = 0.5
 only when they explain less than this share of what the nominal model misses above the noise floor
 (``verdict.explained_share``).  On the concealed input saturation (3 s) the accepted effects explain 65 %
 and a correction found after them lowered the current channel's validation fit by 0.6 points."""
+RIVAL_MARGIN = 0.2
+"""A correction found from the nominal model replaces an accepted library effect only when its validation
+residual is at least this share lower and its BIC at least ``MIN_BIC_GAIN`` lower than the library model's
+(the library's own acceptance rule, with a margin that keeps the library's name wherever it is as good)."""
+
+
+def _beats(found, current) -> bool:
+    """Whether the correction ``found`` (from the nominal model) explains the recording clearly better than
+    the model with the accepted library effects, ``current`` (:data:`RIVAL_MARGIN`)."""
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN
+
+    if found is None or not found.found:
+        return False
+    h = found.scored
+    return h.validation_rss < (1 - RIVAL_MARGIN) * current.validation_rss and h.bic < current.bic - MIN_BIC_GAIN
+
+
 RELEVANT = 0.01
 """A residual counts as left structure only from this share of its channel's standard deviation (RMS)."""
 

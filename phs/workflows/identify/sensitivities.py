@@ -19,9 +19,8 @@ import sympy as sp
 from codegen.functions import _model_hash, generate
 from codegen.simulator import Simulator, step_windows
 from phs.params import TIME
-from phs.signals import linear_kinks
+from phs.piecewise_linear import linear_kinks
 from phs.workflows.identify.c_library import _Library
-
 
 # compile by default when the fit is large: samples x (1 + directions) x the dynamics' size above this
 # (the dynamics' C library, with their forward derivatives, takes a few seconds to build once per
