@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -96,6 +96,22 @@ class Data:
     @property
     def n_train(self) -> int:
         return len(self.recording) * len(self.outputs)
+
+    def head(self, n: int) -> Data:
+        """The same data with the training recording cut to its first ``n`` samples (validation unchanged);
+        itself when the recording is not longer.
+
+        Examples
+        --------
+        >>> rec = Recording.from_arrays(np.linspace(0, 1, 11), {"y": np.zeros(11)})
+        >>> d = Data(rec, rec, np.ones(11, bool), None, ["y"], [], {}, [], None)
+        >>> len(d.head(4).recording), len(d.head(4).validation), d.head(20) is d
+        (4, 11, True)
+        """
+        rec = self.recording
+        if n >= len(rec):
+            return self
+        return replace(self, recording=rec.window(rec.t[0], rec.t[n - 1]))
 
 
 def _transformed(rec: Recording, element, where: str, theta) -> Recording:

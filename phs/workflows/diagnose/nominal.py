@@ -18,6 +18,7 @@ import numpy as np
 
 from codegen import Simulator
 from phs.errors import PHSError
+from phs.workflows.diagnose.pool import run_forked
 from phs.workflows.identify import identify
 
 if TYPE_CHECKING:
@@ -29,7 +30,19 @@ AGREE = 0.01
 """Starts whose fitted training cost is within this relative margin of the best one agree with it."""
 
 
-def fit_nominal(system, data) -> tuple[Scored, Data]:
+def _fit_from(system, data, start: dict):
+    """``(fit, None)`` of the nominal parameters from ``start``, or ``(None, error)`` when the fit fails."""
+    from phs.workflows.diagnose.retry import RECOVERABLE
+
+    try:
+        return identify(system.with_params(start) if start else system, data.recording, data.free,
+                        bounds=data.bounds or None, x0=data.x0, outputs=data.outputs, log_scale=data.log_scale or None,
+                        rtol=data.rtol, max_iter=60, estimate_x0=data.estimate_x0, weights=data.weights), None
+    except RECOVERABLE as exc:
+        return None, exc
+
+
+def fit_nominal(system, data, n_jobs: int = 1) -> tuple[Scored, Data]:
     """The nominal fit, scored, and ``data`` with the channel weights it ended with (``data.weights``
     ``"ml"``: maximum likelihood, :func:`phs.workflows.identify.identify` with ``weights="ml"``), which
     every hypothesis then fits and is scored with.  ``Scored.starts``: ``{"tried", "agreed", "best"}``.
@@ -48,23 +61,13 @@ def fit_nominal(system, data) -> tuple[Scored, Data]:
     (2000, 2, 2)
     """
     from phs.workflows.diagnose.hypotheses import score
-    from phs.workflows.diagnose.retry import RECOVERABLE
 
     t0 = time.perf_counter()
     starts = [("the model's values", {})] + [("a global sample", s) for s in global_starts(system, data, 1)]
-    fits, errors = [], []
-    for label, start in starts:
-        try:
-            fit = identify(system.with_params(start) if start else system, data.recording, data.free,
-                           bounds=data.bounds or None, x0=data.x0, outputs=data.outputs, log_scale=data.log_scale or None,
-                           rtol=data.rtol, max_iter=60, estimate_x0=data.estimate_x0, weights=data.weights)
-        except RECOVERABLE as exc:
-            if not start:
-                errors.append(exc)
-            continue
-        fits.append((label, fit))
+    outcomes = run_forked(_fit_from, [(system, data, start) for _, start in starts], n_jobs)
+    fits = [(label, fit) for (label, _), (fit, _) in zip(starts, outcomes, strict=True) if fit is not None]
     if not fits:
-        raise errors[0]
+        raise outcomes[0][1]
     w = dict(fits[0][1].weights)  # every start's residual measured with the same weights
     costs = [sum(float(np.sum(np.asarray(f.residuals[ch]) ** 2)) * w[ch] ** 2 for ch in data.outputs) for _, f in fits]
     k = int(np.argmin(costs))

@@ -127,7 +127,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         print(f"diagnose {system.name}: fitting the nominal model ({', '.join(free)})", file=sys.stderr, flush=True)
     if not (weights is None or weights == "ml" or isinstance(weights, dict)):
         raise ParameterError(f"diagnose: weights must be 'ml', None or a dict of channel weights, got {weights!r}")
-    nominal, data = fit_nominal(system, data)
+    nominal, data = fit_nominal(system, data, n_jobs)
     data0 = data  # the nominal model's data (a rival correction is fitted from the nominal model)
     findings = _locate(nominal, system, data, noise)
     current, accepted, all_hyps, rounds = nominal, [], [], []
@@ -158,7 +158,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         data_r = data if round_ == 0 or accepted[-1].augmentation.element is None else _through_element(data, accepted[-1])
         if round_ > 0:
             data_r = replace(data_r, free=list(dict.fromkeys(list(data_r.free) + [k for a in accepted for k in a.augmentation.free])))
-        hyps = _screen_and_refit(current, augs, data_r, n_jobs, progress, f"round {round_ + 1}", refit_top)
+        hyps = _screen_and_refit(current, augs, data_r, n_jobs, progress, f"round {round_ + 1}", refit_top, noise)
         hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
         rounds.append(hyps)
         if round_ == 0:

@@ -3,40 +3,41 @@ refitted to convergence, each measured against the model it extends."""
 
 from __future__ import annotations
 
+import math
 import sys
 from dataclasses import replace
 
+import numpy as np
+
+from phs.workflows.diagnose.pool import run_forked
 from phs.workflows.diagnose.ranking import FRICTION_LIKE, _gain, presliding_share
+
+SCREEN_SHARE = 1 / 3
+"""Share of a long training recording the screening fits run on (its leading part, see
+:func:`screening_samples`); the most promising hypotheses are then refitted on the whole recording.
+A screening fit only ranks the hypotheses, and its cost grows with the recording's length."""
+SCREEN_MIN_SAMPLES = 3000
+"""Fewest training samples a screening fit runs on (a recording shorter than twice this is screened whole)."""
 
 
 def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
-    import concurrent.futures as cf
-    import multiprocessing as mp
-
     from phs.workflows.diagnose.hypotheses import fit_augmented
 
     light = replace(nominal, simulated={}, residuals={})
-    out = []
 
-    def done(k, h):  # every result is measured against the model it extends, scored on the same data
+    def done(k, _i, h):  # every result is measured against the model it extends, scored on the same data
         h.reference_rss, h.reference_bic = nominal.validation_rss, nominal.bic
         _progress(progress, label, k, len(augs), h)
 
-    if n_jobs > 1 and len(augs) > 1 and "fork" in mp.get_all_start_methods():
-        # fork: workers inherit the loaded modules (no re-import of the user's script, no __main__ guard)
-        try:
-            with cf.ProcessPoolExecutor(max_workers=n_jobs, mp_context=mp.get_context("fork")) as ex:
-                futs = [ex.submit(fit_augmented, light, a, data, joint) for a in augs]
-                for k, f in enumerate(cf.as_completed(futs), 1):
-                    out.append(f.result())
-                    done(k, out[-1])
-            return out
-        except cf.process.BrokenProcessPool:  # a worker died (e.g. out of memory): finish serially
-            out = []
-    for k, a in enumerate(augs, 1):
-        out.append(fit_augmented(light, a, data, joint))
-        done(k, out[-1])
-    return out
+    if n_jobs > 1:  # the costliest-looking first (new states, starts, parameters), so the last to finish is a short one
+        augs = sorted(augs, key=_expected_cost, reverse=True)
+    return run_forked(fit_augmented, [(light, a, data, joint) for a in augs], n_jobs, done)
+
+
+def _expected_cost(aug) -> tuple:
+    """A rough order of a hypothesis fit's cost among those of one round (they extend the same model):
+    its states (a new state, often stiff, costs most), then starts, then free parameters."""
+    return (len(aug.system.states) if aug.element is None else 0, len(aug.starts), len(aug.free))
 
 
 def _for_refit(h):
@@ -67,19 +68,69 @@ def _refit_friction_rival(current, hyps, pick, data, progress, label):
     return True
 
 
-def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top):
-    """Screen every hypothesis by a loose joint fit (few iterations, input elements by their search alone),
-    then refit the ``refit_top`` most promising to convergence."""
+def screening_samples(current, data, noise: dict | None = None) -> int:
+    """Leading training samples the screening fits run on: :data:`SCREEN_SHARE` of the recording, at least
+    :data:`SCREEN_MIN_SAMPLES` (the whole recording when that is more than half of it), extended until the window holds at least half its share in time of the
+    mismatch above the noise (``Σ_ch w_ch² (r_ch² − σ_ch²)`` of ``current``'s training residual), so that
+    a mismatch that builds up late in the recording is screened where it shows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from types import SimpleNamespace
+    >>> from phs.workflows.recording import Recording
+    >>> from phs.workflows.diagnose.hypotheses import Data
+    >>> t = np.arange(30000) * 1e-3
+    >>> rec = Recording.from_arrays(t, {"y": np.sin(t)})
+    >>> data = Data(rec, rec, np.ones(len(t), bool), None, ["y"], [], {}, [], None)
+    >>> even = SimpleNamespace(residuals={"y": 0.1 * np.sin(50 * t)})
+    >>> late = SimpleNamespace(residuals={"y": np.where(t > 25, 0.1, 0.0)})
+    >>> screening_samples(even, data), screening_samples(late, data)
+    (10000, 27274)
+    """
+    n = len(data.recording)
+    m0 = max(SCREEN_MIN_SAMPLES, math.ceil(SCREEN_SHARE * n))
+    if 2 * m0 > n:  # a window would save less than half: the whole recording
+        return n
+    res = getattr(current, "residuals", None) or {}
+    if any(ch not in res or len(res[ch]) != n for ch in data.outputs):
+        return m0
+    from phs.workflows.diagnose.hypotheses import weight_squared
+
+    excess = np.zeros(n)
+    for ch in data.outputs:
+        sigma = (noise or {}).get(ch, 0.0)
+        excess += weight_squared(data.weights, ch, data.recording[ch]) * (np.asarray(res[ch], float) ** 2 - sigma**2)
+    total = float(np.sum(np.clip(excess, 0.0, None)))
+    if total <= 0.0:
+        return m0
+    share = np.cumsum(np.clip(excess, 0.0, None)) / total  # share of the mismatch in the first k + 1 samples
+    ok = np.nonzero(share[m0 - 1:] >= 0.5 * np.arange(m0, n + 1) / n)[0]
+    return int(m0 + ok[0]) if ok.size else n
+
+
+def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, noise=None):
+    """Screen every hypothesis by a loose joint fit (few iterations, input elements by their search alone)
+    on the leading part of the training recording (:func:`screening_samples`; validation on the whole
+    validation recording), then refit the ``refit_top`` most promising to convergence on all of it."""
     if refit_top <= 0 or len(augs) <= refit_top:
         return _run_all(current, augs, data, n_jobs, progress, label)
-    screened = _run_all(current, augs, data, n_jobs, progress, label + " screening", joint=False)
+    from phs.workflows.diagnose.hypotheses import score
+
+    short = data.head(screening_samples(current, data, noise))
+    base = current
+    if short is not data:  # the model the hypotheses extend, scored on the same window
+        base = score(current.label, current.system, current.values, current.x0, current.n_params, short,
+                     augmentation=current.augmentation, element_values=current.element_values)
+    screened = _run_all(base, augs, short, n_jobs, progress, label + " screening", joint=False)
     screened.sort(key=lambda h: (not h.ok, -_gain(current, h)))
     top, seen = [], set()
     for h in screened:  # the most promising distinct effects (one attachment each)
         if h.ok and h.augmentation.effect not in seen and len(top) < refit_top:
             top.append(h)
             seen.add(h.augmentation.effect)
-    refits = [_for_refit(h) for h in top]
+    # longest screening first: with fewer workers than refits the longest must not start last
+    refits = [_for_refit(h) for h in sorted(top, key=lambda h: -h.seconds)]
     full = _run_all(current, refits, data, n_jobs, progress, label + " joint refit")
     done = {(f.augmentation.effect, f.augmentation.attached_to) for f in full}
     rest = [h for h in screened if (h.augmentation.effect, h.augmentation.attached_to) not in done]

@@ -192,7 +192,7 @@ class _Problem:
     def _params(self, z):
         """Parameter vector and d p_free / d theta (diagonal) at ``z``."""
         th = np.asarray(z[: self.n_theta], dtype=float)
-        g = np.where(self.is_log, np.exp(th), 1.0)
+        g = np.where(self.is_log, np.exp(np.clip(th, -700.0, 700.0)), 1.0)  # beyond: a float overflow, not a value
         p = self.p0.copy()
         p[self.ifree] = self.nominal * np.where(self.is_log, g, th)
         return p, self.nominal * g

@@ -102,6 +102,12 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     """First-order share of the training residual each of ``terms`` could remove next to ``chosen``
     and the nominal free parameters, best first (terms that cannot help are left out).
 
+    The output sensitivities to every term's coefficient (at zero) and to the nominal free parameters
+    come from one integration with CVODES forward sensitivities
+    (:class:`~phs.workflows.identify.sensitivities._Problem`); when that integration fails, from one
+    simulation per term with its coefficient nudged by :data:`NUDGE` (a term whose simulation fails is
+    then left out alone).
+
     Parameters
     ----------
     current : Scored
@@ -116,42 +122,25 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     list of (Term, float, float)
         Each term with its first-order share and its first-order best coefficient (a fit's start).
     """
-    from codegen import Simulator
     from phs.errors import PHSError
-    from phs.workflows.diagnose.hypotheses import _simulate
 
     start = _start(current, chosen)
     cand = Discovered(list(chosen) + list(terms), start)
     system = cand.apply(base_system)
-    sim = Simulator(system, energy=False)
     p0 = {p.name: p.value for p in cand.params()}
     x0 = _x0(current, system)
-    rec = data.recording
-    scale = {ch: float(np.std(rec[ch])) or 1.0 for ch in data.outputs}
-
-    def outputs(over):
-        r = _simulate(system, rec, x0, params={**p0, **over}, sim=sim)
-        return np.concatenate([np.asarray(r[ch], float) / scale[ch] for ch in data.outputs])
-
-    y0 = outputs({})
-    r = np.concatenate([np.asarray(rec[ch], float) / scale[ch] for ch in data.outputs]) - y0
-    cols = []
-    for k in data.free:
-        v = float(current.values.get(k, system.param(k).value))
-        dv = 1e-3 * (abs(v) or 1.0)
-        cols.append((outputs({k: v + dv}) - y0) / dv)
-    A = np.column_stack(cols) if cols else np.zeros((len(y0), 0))
-    Qa = np.linalg.qr(A)[0] if cols else A
+    values = {k: float(current.values.get(k, system.param(k).value)) for k in data.free}
+    try:
+        r, A, cols = _sensitivity_columns(system, data, x0, {**p0, **values}, list(data.free), [t.parameter for t in terms])
+    except (PHSError, RuntimeError, ValueError, np.linalg.LinAlgError):
+        r, A, cols = _nudged_columns(system, data, x0, p0, values, [t.parameter for t in terms])
+    Qa = np.linalg.qr(A)[0] if A.shape[1] else A
     out = []
     rr = float(r @ r) or 1.0
-    for t in terms:
-        try:
-            j = (outputs({t.parameter: p0[t.parameter] + NUDGE}) - y0) / NUDGE
-        except (PHSError, RuntimeError):
+    for t, j in zip(terms, cols, strict=True):
+        if j is None or not np.all(np.isfinite(j)):
             continue
-        if not np.all(np.isfinite(j)):
-            continue
-        jp = j - Qa @ (Qa.T @ j) if cols else j
+        jp = j - Qa @ (Qa.T @ j) if A.shape[1] else j
         jj = float(jp @ jp)
         if jj <= 1e-30 * len(jp):
             continue
@@ -161,6 +150,65 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
         out.append((t, float(jp @ r) ** 2 / jj / rr, coef))
     out.sort(key=lambda tg: -tg[1])
     return out
+
+
+def _channel_scales(data) -> dict:
+    return {ch: float(np.std(data.recording[ch])) or 1.0 for ch in data.outputs}
+
+
+def _sensitivity_columns(system, data, x0, values: dict, free: list, params: list):
+    """The training residual ``r`` (measured minus simulated, each channel over its standard deviation,
+    channels one after the other), the output sensitivities to the ``free`` parameters (columns of ``A``,
+    in any scale: only their span is used) and one column per parameter of ``params`` (per unit of it),
+    all at ``values`` from one integration with forward sensitivities."""
+    from phs.workflows.identify.sensitivities import _Problem
+
+    names = list(free) + list(params)
+    # linear fit coordinates p = scale * theta: a parameter at zero gets scale 1 and theta 0, so its column
+    # is the derivative per unit of it at zero
+    at = {k: float(values.get(k, system.param(k).value)) for k in names}
+    scale = {k: (v if v != 0.0 else 1.0) for k, v in at.items()}
+    pvec = system.param_vector({**values, **scale}, signs=False)
+    weights = {ch: 1.0 / sd for ch, sd in _channel_scales(data).items()}
+    prob = _Problem(system, data.recording, names, [], data.outputs, weights, np.asarray(x0, float), [], data.rtol, None,
+                    compile=False, params=pvec)
+    z = np.array([1.0 if at[k] != 0.0 else 0.0 for k in names])
+    res, J = prob.jac(z)
+    if not (np.all(np.isfinite(res)) and np.all(np.isfinite(J))):
+        raise RuntimeError("non-finite sensitivities")
+    nf = len(free)
+    return -res, J[:, :nf], [J[:, nf + k] / scale[name] for k, name in enumerate(params)]
+
+
+def _nudged_columns(system, data, x0, p0: dict, values: dict, params: list):
+    """As :func:`_sensitivity_columns`, by one simulation per parameter (free ones moved by 1e-3 of
+    their value, the terms' coefficients by :data:`NUDGE`); a column whose simulation fails is None."""
+    from codegen import Simulator
+    from phs.errors import PHSError
+    from phs.workflows.diagnose.hypotheses import _simulate
+
+    sim = Simulator(system, energy=False)
+    rec = data.recording
+    scale = _channel_scales(data)
+
+    def outputs(over):
+        r = _simulate(system, rec, x0, params={**p0, **over}, sim=sim)
+        return np.concatenate([np.asarray(r[ch], float) / scale[ch] for ch in data.outputs])
+
+    y0 = outputs({})
+    r = np.concatenate([np.asarray(rec[ch], float) / scale[ch] for ch in data.outputs]) - y0
+    cols = []
+    for k, v in values.items():
+        dv = 1e-3 * (abs(v) or 1.0)
+        cols.append((outputs({k: v + dv}) - y0) / dv)
+    A = np.column_stack(cols) if cols else np.zeros((len(y0), 0))
+    terms = []
+    for k in params:
+        try:
+            terms.append((outputs({k: p0[k] + NUDGE}) - y0) / NUDGE)
+        except (PHSError, RuntimeError):
+            terms.append(None)
+    return r, A, terms
 
 
 def _fitted(ranked, top: int) -> list:
