@@ -361,3 +361,24 @@ def test_a_rival_correction_replaces_a_library_effect_only_when_clearly_better()
     assert not _beats(rival(1 - RIVAL_MARGIN + 0.01, 100.0 - MIN_BIC_GAIN - 1), library)  # residual not low enough
     assert not _beats(rival(clearly, 100.0 - MIN_BIC_GAIN + 1), library)  # BIC not low enough
     assert not _beats(rival(0.1, 0.0, found=False), library) and not _beats(None, library)
+
+
+def test_a_library_effect_must_earn_its_place_next_to_the_correction():
+    """``_earns``: the model with the accepted library effects and the correction must pass the library's
+    acceptance rule against the correction alone (BIC lower by MIN_BIC_GAIN and validation residual lower
+    by MIN_VALIDATION_GAIN), else the effects are dropped (``verdict["dropped"]``)."""
+    from types import SimpleNamespace
+
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+    from phs.workflows.diagnose.run import _earns
+
+    alone = SimpleNamespace(validation_rss=1.0, bic=100.0)
+
+    def with_library(vrss, bic):
+        return SimpleNamespace(validation_rss=vrss, bic=bic)
+
+    better = 1 - MIN_VALIDATION_GAIN - 0.001
+    assert _earns(with_library(better, 100.0 - MIN_BIC_GAIN - 1), alone)
+    assert not _earns(with_library(better, 100.0 - MIN_BIC_GAIN + 1), alone)  # BIC not low enough
+    assert not _earns(with_library(1 - MIN_VALIDATION_GAIN + 0.001, 100.0 - MIN_BIC_GAIN - 1), alone)  # residual
+    assert not _earns(with_library(1.2, 90.0), alone)  # worse on validation

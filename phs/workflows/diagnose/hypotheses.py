@@ -69,6 +69,7 @@ class Scored:
     recovery: str = ""                   # how a failing or worse fit was rescued (retries, neutral point)
     same_physics: list = field(default_factory=list)  # labels it was preferred over as the same physics
     starts: dict = field(default_factory=dict)         # nominal fit: starts tried, agreed, which one won
+    undetermined: list = field(default_factory=list)   # new parameters along a direction the data do not determine
 
     @property
     def ok(self) -> bool:
@@ -273,6 +274,7 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
         h = score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
                   seconds=time.perf_counter() - t0, train_residuals=best.residuals)
         h.recovery = recovery
+        h.undetermined = undetermined(best, aug.free)
         return _never_worse(nominal, h, aug, data, t0)
     except FitFailed as exc:
         msg = str(exc)
@@ -280,6 +282,22 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
         msg = reason(exc)
     return Scored(label, aug.system, {}, nominal.x0, 0, {}, {}, math.inf, math.inf, math.inf, {}, {},
                   time.perf_counter() - t0, aug, {}, msg)
+
+
+def undetermined(fit, names) -> list[str]:
+    """The parameters among ``names`` that the fit ``fit`` leaves undetermined: along a direction of the
+    free parameters that the data do not determine (an infinite 95 % interval,
+    :mod:`phs.workflows.identify.identifiability`), e.g. an added mass next to a free mass.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> fit = SimpleNamespace(intervals={"m": (-np.inf, np.inf), "mu": (-np.inf, np.inf), "k": (0.9, 1.1)})
+    >>> undetermined(fit, ["mu", "k"])
+    ['mu']
+    """
+    intervals = getattr(fit, "intervals", None) or {}
+    return [k for k in names if k in intervals and not all(math.isfinite(float(v)) for v in intervals[k])]
 
 
 def _promising_starts(system, starts: list, x0: dict, data: Data, keep: int | None = None) -> list:

@@ -75,7 +75,28 @@ def _delta_bic(nominal, h) -> float:
 
 
 def _accepted(nominal, h) -> bool:
-    return h.ok and h.stage == "full" and -_delta_bic(nominal, h) >= MIN_BIC_GAIN and _gain(nominal, h) >= MIN_VALIDATION_GAIN
+    return (h.ok and h.stage == "full" and -_delta_bic(nominal, h) >= MIN_BIC_GAIN and _gain(nominal, h) >= MIN_VALIDATION_GAIN
+            and not undetermined_effect(h))
+
+
+def undetermined_effect(h) -> bool:
+    """Whether the data leave every new parameter of ``h`` undetermined (``Scored.undetermined``): the
+    effect then only trades off with the nominal parameters, and an improvement it shows is not evidence
+    for it (on the quantised-encoder loop with a looser integration tolerance, an added mass next to the
+    free mass gained 0.3 points from integration error alone).  Such a hypothesis is never accepted.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> aug = SimpleNamespace(free=["added_mass.mu"], element=None)
+    >>> undetermined_effect(SimpleNamespace(augmentation=aug, undetermined=["added_mass.mu"]))
+    True
+    >>> undetermined_effect(SimpleNamespace(augmentation=aug, undetermined=[]))
+    False
+    """
+    aug = h.augmentation
+    free = list(getattr(aug, "free", ()) or ())
+    return bool(free) and aug.element is None and set(free) <= set(getattr(h, "undetermined", ()) or ())
 
 
 def _pick(nominal, hyps, data=None):

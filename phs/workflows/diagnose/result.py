@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import phs.workflows.diagnose.report as report
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain, calibrated
+from phs.workflows.diagnose.ranking import (FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain,
+                                            calibrated, undetermined_effect)
 
 if TYPE_CHECKING:
     from phs.system import PHSystem
@@ -92,7 +93,7 @@ class Diagnosis:
                               "validation_residual": h.validation_rss,
                               "validation_gain": _gain(self.nominal, h)},
                 "n_params": h.n_params, "accepted": any(h is a for a in self.accepted), "seconds": h.seconds,
-                "no_improvement": h.no_improvement,
+                "no_improvement": h.no_improvement, "undetermined": list(h.undetermined),
                 **({"error": h.error} if h.error else {}), **({"recovery": h.recovery} if h.recovery else {}),
             }
 
@@ -139,6 +140,8 @@ class Diagnosis:
             lines.append(f"    {h.label:<32} validation fit {vf}; ΔBIC {_delta_bic(self.nominal, h):+.1f}; "
                          f"gain {100 * _gain(self.nominal, h):+.1f} %" + (" (screening)" if h.stage != "full" else "")
                          + (" (no improvement: the fit ended at the nominal model)" if h.no_improvement else "")
+                         + (f" (not accepted: the data do not determine {', '.join(h.undetermined)})"
+                            if undetermined_effect(h) else "")
                          + ("  accepted" if any(h is a for a in self.accepted) else ""))
         if self.discovery is not None:
             lines += report.discovery_lines(self.discovery)

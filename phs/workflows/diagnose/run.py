@@ -183,13 +183,13 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         pool = [c for c in cands if c.effect in promising[:6] and c.effect != pick.augmentation.effect]
         if not pool:
             break
-    found = None
+    found, dropped = None, []
     final_findings = _locate(current, current.system, data, noise) if accepted else findings
     left = _structured(current, noise, outs) or _coloured(final_findings, current, data)
     # automatically only when the library explains too little: an accepted effect that explains at least
     # DISCOVER_BELOW of the mismatch is the verdict, and a correction on top of it would blur it
     if discover or (discover is None and left and (not accepted or explained_share(nominal, current, data, noise) < DISCOVER_BELOW)):
-        from phs.workflows.diagnose.discover import discover as _discover
+        from phs.workflows.diagnose.discover import discover as _discover, without_library
 
         if progress:
             print(f"diagnose {system.name}: discovering a correction outside the library", file=sys.stderr, flush=True)
@@ -197,6 +197,11 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         # refits them): an effect standing in for part of what the correction models can then give way
         data_d = replace(data, free=list(dict.fromkeys(list(data.free) + [k for a in accepted for k in a.augmentation.free])))
         found = _discover(current, nominal, data_d, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+        if accepted and found.found:  # each accepted effect must earn its place next to the correction
+            alone = without_library(found, nominal, data0, noise, all_hyps, progress=progress)
+            if alone is not None and not _earns(found.scored, alone.scored):
+                dropped = [(a.label, found.scored, alone.scored) for a in accepted]
+                found, current, accepted, data = alone, nominal, [], data0
     rival = None
     if found is None and accepted and left and discover is not False:
         # the accepted library effect explains most of the mismatch but leaves structure: a correction
@@ -227,6 +232,14 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                                   f"(validation residual {100 * (1 - rival.scored.validation_rss / best.validation_rss):.0f} % lower, "
                                   f"BIC {rival.scored.bic - best.bic:+.1f}), which only imitates it." if best is not None else ""))
         verdict["rival_of"] = best.augmentation.effect if best is not None else None
+    if dropped:
+        labels = ", ".join(lab for lab, _, _ in dropped)
+        with_lib, alone = dropped[0][1], dropped[0][2]
+        verdict["explanation"] += (f" The library's {labels} was accepted first but does not earn its place next to the correction "
+                                   f"(with it: BIC {with_lib.bic - alone.bic:+.1f}, validation residual "
+                                   f"{100 * (alone.validation_rss - with_lib.validation_rss) / alone.validation_rss:+.1f} % lower than the "
+                                   "correction alone): it only stood in for part of it.")
+        verdict["dropped"] = [lab for lab, _, _ in dropped]
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)
@@ -241,6 +254,18 @@ RIVAL_MARGIN = 0.2
 """A correction found from the nominal model replaces an accepted library effect only when its validation
 residual is at least this share lower and its BIC at least ``MIN_BIC_GAIN`` lower than the library model's
 (the library's own acceptance rule, with a margin that keeps the library's name wherever it is as good)."""
+
+
+def _earns(with_library, alone) -> bool:
+    """Whether accepted library effects earn their place next to a discovered correction: the model with
+    them (``with_library``) passes the library's acceptance rule against the correction alone (BIC
+    ``MIN_BIC_GAIN`` lower, validation residual ``MIN_VALIDATION_GAIN`` lower)."""
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+
+    if alone.validation_rss <= 0:
+        return True
+    gain = (alone.validation_rss - with_library.validation_rss) / alone.validation_rss
+    return alone.bic - with_library.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN
 
 
 def _beats(found, current) -> bool:

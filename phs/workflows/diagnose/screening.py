@@ -70,9 +70,10 @@ def _refit_friction_rival(current, hyps, pick, data, progress, label):
 
 def screening_samples(current, data, noise: dict | None = None) -> int:
     """Leading training samples the screening fits run on: :data:`SCREEN_SHARE` of the recording, at least
-    :data:`SCREEN_MIN_SAMPLES` (the whole recording when that is more than half of it), extended until the window holds at least half its share in time of the
-    mismatch above the noise (``Σ_ch w_ch² (r_ch² − σ_ch²)`` of ``current``'s training residual), so that
-    a mismatch that builds up late in the recording is screened where it shows.
+    :data:`SCREEN_MIN_SAMPLES` (the whole recording when that is more than half of it), extended until the
+    window holds at least half its share in time of the mismatch above the noise (``Σ_ch w_ch² (r_ch² − σ_ch²)``
+    of ``current``'s training residual), so that a mismatch that builds up late in the recording is screened
+    where it shows.
 
     Examples
     --------
@@ -100,7 +101,8 @@ def screening_samples(current, data, noise: dict | None = None) -> int:
     excess = np.zeros(n)
     for ch in data.outputs:
         sigma = (noise or {}).get(ch, 0.0)
-        excess += weight_squared(data.weights, ch, data.recording[ch]) * (np.asarray(res[ch], float) ** 2 - sigma**2)
+        w2 = weight_squared(data.weights, ch, data.recording[ch])
+        excess += w2 * (np.asarray(res[ch], float) ** 2 - sigma**2)
     total = float(np.sum(np.clip(excess, 0.0, None)))
     if total <= 0.0:
         return m0

@@ -52,6 +52,37 @@ def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int 
     return d
 
 
+def without_library(found, nominal, data, noise: dict, hypotheses=(), *, progress: bool = False):
+    """The correction ``found`` (discovered after accepted library effects) refitted on the nominal model
+    alone, named, as a :class:`Discovery`; None when its terms need a state only the library effects added
+    or the refit does not improve on the nominal model.
+
+    A library effect accepted first may only stand in for part of what the correction models (a sensor
+    offset for the mean of a leakage that grows with heat): with the correction found, the effect must
+    earn its place again by the library's own acceptance rule, against the correction alone
+    (:func:`phs.workflows.diagnose.run.diagnose` drops it otherwise)."""
+    from phs.workflows.diagnose.discover.selection import _passes
+    from phs.workflows.diagnose.screening import _run_all
+
+    if found is None or not found.found or any(t.state not in nominal.system.state_names for t in found.terms):
+        return None
+    terms = list(found.terms)
+    start = {n: float(found.scored.values[n]) for t in terms for n in t.parameters if n in found.scored.values}
+    aug = Discovered(terms, start).augment(nominal.system, terms[0].state, None)
+    alone = _run_all(nominal, [aug], data, 1, progress, "discover without the library")[0]
+    if not alone.ok or alone.no_improvement or not _passes(alone):
+        return None
+    alone.stage = "full"
+    alone.reference_rss, alone.reference_bic = nominal.validation_rss, nominal.bic
+    alone.label = f"discovered@{found.terms[0].state}"
+    d = Discovery(nominal, alone, tuple(found.terms), list(found.steps), list(found.screened), found.seconds)
+    d.described = describe(d.terms, d.values, nominal.system)
+    d.similar = resemblance(alone, nominal, nominal, hypotheses, data)
+    d.share = explained_share(nominal, alone, data, noise)
+    d.text = sentence(d.described, d.similar, d.share)
+    return d
+
+
 def amend_verdict(verdict: dict, discovery, scale: float = 1.0, library_share: float | None = None, lead_below: float = 0.5) -> dict:
     """The verdict with the discovered correction: effect ``discovered`` when no library effect was
     accepted, ``discovered`` appended to ``effects``, its paragraph appended to the explanation and
@@ -93,5 +124,5 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0, library_share: f
     return out
 
 
-__all__ = ["discover", "amend_verdict", "select", "Discovery", "Discovered", "Term", "dictionary", "describe", "resemblance",
+__all__ = ["discover", "without_library", "amend_verdict", "select", "Discovery", "Discovered", "Term", "dictionary", "describe", "resemblance",
            "explained_share", "sentence", "source", "write_source", "RESEMBLES"]
