@@ -236,9 +236,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         labels = ", ".join(lab for lab, _, _ in dropped)
         with_lib, alone = dropped[0][1], dropped[0][2]
         verdict["explanation"] += (f" The library's {labels} was accepted first but does not earn its place next to the correction "
-                                   f"(with it: BIC {with_lib.bic - alone.bic:+.1f}, validation residual "
-                                   f"{100 * (alone.validation_rss - with_lib.validation_rss) / alone.validation_rss:+.1f} % lower than the "
-                                   "correction alone): it only stood in for part of it.")
+                                   f"(the model with it against the correction alone: BIC {with_lib.bic - alone.bic:+.1f}, validation "
+                                   f"residual {100 * (with_lib.validation_rss / alone.validation_rss - 1):+.1f} %): it only stood in "
+                                   "for part of it.")
         verdict["dropped"] = [lab for lab, _, _ in dropped]
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,

@@ -64,11 +64,14 @@ def without_library(found, nominal, data, noise: dict, hypotheses=(), *, progres
     from phs.workflows.diagnose.discover.selection import _passes
     from phs.workflows.diagnose.screening import _run_all
 
-    if found is None or not found.found or any(t.state not in nominal.system.state_names for t in found.terms):
+    if found is None or not found.found:
         return None
     terms = list(found.terms)
     start = {n: float(found.scored.values[n]) for t in terms for n in t.parameters if n in found.scored.values}
-    aug = Discovered(terms, start).augment(nominal.system, terms[0].state, None)
+    try:  # a term on a state only the library effects added does not attach to the nominal model
+        aug = Discovered(terms, start).augment(nominal.system, terms[0].state, None)
+    except Exception:  # noqa: BLE001 - any failure to attach means: no correction alone
+        return None
     alone = _run_all(nominal, [aug], data, 1, progress, "discover without the library")[0]
     if not alone.ok or alone.no_improvement or not _passes(alone):
         return None
