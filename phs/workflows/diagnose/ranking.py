@@ -75,15 +75,15 @@ def _delta_bic(nominal, h) -> float:
 
 
 def _accepted(nominal, h) -> bool:
-    return (h.ok and h.stage == "full" and -_delta_bic(nominal, h) >= MIN_BIC_GAIN and _gain(nominal, h) >= MIN_VALIDATION_GAIN
-            and not undetermined_effect(h))
+    return h.ok and h.stage == "full" and -_delta_bic(nominal, h) >= MIN_BIC_GAIN and _gain(nominal, h) >= MIN_VALIDATION_GAIN
 
 
 def undetermined_effect(h) -> bool:
-    """Whether the data leave every new parameter of ``h`` undetermined (``Scored.undetermined``): the
-    effect then only trades off with the nominal parameters, and an improvement it shows is not evidence
-    for it (on the quantised-encoder loop with a looser integration tolerance, an added mass next to the
-    free mass gained 0.3 points from integration error alone).  Such a hypothesis is never accepted.
+    """Whether the identifiability analysis of ``h``'s fit puts every new parameter of ``h`` along a
+    direction the data do not determine (``Scored.undetermined``).  Reported, not a reason to refuse the
+    effect: the analysis counts a parameter as undetermined from a component of 1e-3 along such a
+    direction, and on the curling HASEL (whose nominal parameters already leave one undetermined) it
+    flags the charge retention that lowers the validation residual by 48 % (ΔBIC −709).
 
     Examples
     --------

@@ -140,7 +140,7 @@ class Diagnosis:
             lines.append(f"    {h.label:<32} validation fit {vf}; ΔBIC {_delta_bic(self.nominal, h):+.1f}; "
                          f"gain {100 * _gain(self.nominal, h):+.1f} %" + (" (screening)" if h.stage != "full" else "")
                          + (" (no improvement: the fit ended at the nominal model)" if h.no_improvement else "")
-                         + (f" (not accepted: the data do not determine {', '.join(h.undetermined)})"
+                         + (f" (the data do not determine {', '.join(h.undetermined)} separately)"
                             if undetermined_effect(h) else "")
                          + ("  accepted" if any(h is a for a in self.accepted) else ""))
         if self.discovery is not None:

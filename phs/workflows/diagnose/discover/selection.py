@@ -293,7 +293,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
     -------
     Discovery
     """
-    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN, undetermined_effect
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
     from phs.workflows.diagnose.screening import _run_all
 
     wall = time.perf_counter()
@@ -319,7 +319,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         for h in ok:
             dbic = h.bic - current.bic
             gain = (current.validation_rss - h.validation_rss) / current.validation_rss if current.validation_rss > 0 else 0.0
-            accept = -dbic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and not undetermined_effect(h) and _passes(h)
+            accept = -dbic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and _passes(h)
             out.steps.append({"term": h.augmentation.component.split(" + ")[-1], "delta_bic": float(dbic), "validation_gain": float(gain),
                               "accepted": bool(accept)})
             if accept:
