@@ -127,5 +127,5 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0, library_share: f
     return out
 
 
-__all__ = ["discover", "without_library", "amend_verdict", "select", "Discovery", "Discovered", "Term", "dictionary", "describe", "resemblance",
-           "explained_share", "sentence", "source", "write_source", "RESEMBLES"]
+__all__ = ["discover", "without_library", "amend_verdict", "select", "Discovery", "Discovered", "Term", "dictionary", "describe",
+           "resemblance", "explained_share", "sentence", "source", "write_source", "RESEMBLES"]

@@ -237,13 +237,10 @@ def _window(data, base):
     """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples (the forward
     selection's fits; validation scores stay on the whole validation recording); ``data`` itself when
     short enough or when ``base`` ends in an input element (its transformed input belongs to the whole)."""
-    from dataclasses import replace
-
-    rec = data.recording
     aug = base.augmentation
-    if len(rec) <= MAX_SAMPLES or (aug is not None and aug.element is not None) or data.train_mask is not None:
+    if (aug is not None and aug.element is not None) or data.train_mask is not None:
         return data
-    return replace(data, recording=rec.window(rec.t[0], rec.t[MAX_SAMPLES - 1]))
+    return data.head(MAX_SAMPLES)
 
 
 def _rescore(h, data):
