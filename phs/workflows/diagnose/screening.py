@@ -20,7 +20,9 @@ SCREEN_MIN_SAMPLES = 3000
 """Fewest training samples a screening fit runs on (a recording shorter than twice this is screened whole)."""
 
 
-def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
+def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True, ordered=False):
+    """Fit ``augs`` (in parallel with ``n_jobs``; the costliest-looking first unless ``ordered``), each
+    measured against ``nominal``."""
     from phs.workflows.diagnose.hypotheses import fit_augmented
 
     light = replace(nominal, simulated={}, residuals={})
@@ -29,7 +31,7 @@ def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True):
         h.reference_rss, h.reference_bic = nominal.validation_rss, nominal.bic
         _progress(progress, label, k, len(augs), h)
 
-    if n_jobs > 1:  # the costliest-looking first (new states, starts, parameters), so the last to finish is a short one
+    if n_jobs > 1 and not ordered:  # the costliest-looking first (new states, starts, parameters): the last to finish is short
         augs = sorted(augs, key=_expected_cost, reverse=True)
     return run_forked(fit_augmented, [(light, a, data, joint) for a in augs], n_jobs, done)
 
@@ -133,7 +135,7 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, n
             seen.add(h.augmentation.effect)
     # longest screening first: with fewer workers than refits the longest must not start last
     refits = [_for_refit(h) for h in sorted(top, key=lambda h: -h.seconds)]
-    full = _run_all(current, refits, data, n_jobs, progress, label + " joint refit")
+    full = _run_all(current, refits, data, n_jobs, progress, label + " joint refit", ordered=True)
     done = {(f.augmentation.effect, f.augmentation.attached_to) for f in full}
     rest = [h for h in screened if (h.augmentation.effect, h.augmentation.attached_to) not in done]
     for h in rest:
