@@ -67,3 +67,45 @@ def test_long_recording_screens_on_its_window_and_refits_on_all(long_offset):
     # the accepted offset is refitted on the whole training part: its value is the concealed 0.05 V
     off = [v for k, v in d.final.values.items() if "offset" in k]
     assert off and abs(off[0] - 0.05) < 2e-3
+
+
+def test_separate_validation_is_screened_on_the_same_share():
+    # with a validation recording of its own, screening scores on its leading third too (the ranking
+    # compares each hypothesis with the nominal model on the same samples: the offset's mismatch is
+    # spread evenly, so the window is not extended); refits score on all of it
+    t = np.arange(9000) * 2e-5
+    u = np.where((t % 0.02) > 0.01, 1.0, 0.0)
+    rng = np.random.default_rng(1)
+
+    y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+
+    def rec():  # the same truth, noise of its own
+        return Recording.from_arrays(t, {"U": u, "v_C": y + 1e-3 * rng.standard_normal(len(t))})
+
+    d = diagnose(rc_circuit(R=1.3e3), rec(), validation=rec(), free=["R.R"], n_jobs=1)
+    assert d.effect == "offset"
+    screened = [h for h in d.hypotheses if h.ok and h.stage == "screening" and not h.no_improvement]
+    full = [h for h in d.hypotheses if h.ok and h.stage == "full" and not h.no_improvement]
+    assert screened and full
+    assert {len(h.simulated["validation"]["v_C"]) for h in screened} == {SCREEN_MIN_SAMPLES}
+    assert {len(h.simulated["validation"]["v_C"]) for h in full} == {len(t)}
+    assert len(d.final.simulated["validation"]["v_C"]) == len(t)
+
+
+def test_resemblance_compares_a_screened_hypothesis_on_its_samples():
+    # a hypothesis scored on the first half of the validation samples is compared over that half
+    from types import SimpleNamespace as NS
+
+    from phs.workflows.diagnose.discover.naming import resemblance
+
+    y = np.arange(8.0)
+    data = NS(outputs=["y"], validation={"y": y}, val_mask=np.ones(8, bool))
+
+    def run(v):
+        return NS(simulated={"validation": {"y": np.asarray(v, float)}}, ok=True, no_improvement=False)
+
+    lib, other = run([0, 2, 0, 2]), run([0, -1, 0, -1])
+    lib.augmentation, other.augmentation = NS(effect="offset"), NS(effect="cubic_stiffness")
+    found = run([0, 1, 0, 1, 5, 5, 5, 5])
+    sim = dict(resemblance(found, run(np.zeros(8)), run(np.zeros(8)), [lib, other], data))
+    assert sim["offset"] == pytest.approx(1.0) and sim["cubic_stiffness"] == pytest.approx(-1.0)

@@ -98,9 +98,10 @@ class Data:
     def n_train(self) -> int:
         return len(self.recording) * len(self.outputs)
 
-    def head(self, n: int) -> Data:
-        """The same data with the training recording cut to its first ``n`` samples (validation unchanged);
-        itself when the recording is not longer.
+    def head(self, n: int, n_validation: int | None = None) -> Data:
+        """The same data with the training recording cut to its first ``n`` samples and, with
+        ``n_validation``, a separate validation recording cut to its first ``n_validation`` (a split
+        recording keeps its validation part: it lies at the end); itself when nothing is cut.
 
         Examples
         --------
@@ -108,11 +109,14 @@ class Data:
         >>> d = Data(rec, rec, np.ones(11, bool), None, ["y"], [], {}, [], None)
         >>> len(d.head(4).recording), len(d.head(4).validation), d.head(20) is d
         (4, 11, True)
+        >>> len(d.head(4, 5).validation), len(d.head(4, 5).val_mask)
+        (5, 5)
         """
-        rec = self.recording
-        if n >= len(rec):
-            return self
-        return replace(self, recording=rec.window(rec.t[0], rec.t[n - 1]))
+        rec, val = self.recording, self.validation
+        out = self if n >= len(rec) else replace(self, recording=rec.window(rec.t[0], rec.t[n - 1]))
+        if n_validation is not None and self.train_mask is None and len(self.val_mask) == len(val) and 3 <= n_validation < len(val):
+            out = replace(out, validation=val.window(val.t[0], val.t[n_validation - 1]), val_mask=np.asarray(self.val_mask)[:n_validation])
+        return out
 
 
 def _transformed(rec: Recording, element, where: str, theta) -> Recording:

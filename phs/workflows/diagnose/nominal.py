@@ -5,6 +5,8 @@ Starts: the values the model was built with, and the best of :data:`GLOBAL_SAMPL
 Sobol sample over the free parameters' declared ranges (log-uniform where a range spans decades), each
 scored by one simulation (a cheap global step).  Each start is fitted by output error; the best training
 cost wins, and the report says how many starts agreed with it (ended within :data:`AGREE` of its cost).
+On a long recording the starts are sampled and fitted on its leading window
+(:func:`~phs.workflows.diagnose.screening.leading_samples`) and the best is then polished on all of it.
 """
 
 from __future__ import annotations
@@ -62,8 +64,29 @@ def fit_nominal(system, data, n_jobs: int = 1) -> tuple[Scored, Data]:
     """
     from phs.workflows.diagnose.hypotheses import score
 
+    from phs.workflows.diagnose.screening import leading_samples
+
     t0 = time.perf_counter()
-    starts = [("the model's values", {})] + [("a global sample", s) for s in global_starts(system, data, 1)]
+    short = data.head(leading_samples(len(data.recording)))
+    starts = [("the model's values", {})] + [("a global sample", s) for s in global_starts(system, short, 1)]
+    label, fit, agreed = _best_start(system, short, starts, n_jobs)
+    if short is not data:  # the best start, polished on the whole recording
+        whole = replace(data, x0=_state_dict(system, fit.x0)) if data.estimate_x0 else data
+        polished, _ = _fit_from(system.with_params(fit.values), whole, {})
+        if polished is None:  # the whole recording from every start, as for a short one
+            label, fit, agreed = _best_start(system, data, starts, n_jobs)
+        else:
+            fit = polished
+    data = replace(data, weights=dict(fit.weights)) if data.weights is not None else data
+    h = score("nominal", system, fit.values, fit.x0, len(data.free), data, seconds=time.perf_counter() - t0,
+              train_residuals=fit.residuals)
+    h.starts = {"tried": len(starts), "agreed": agreed, "best": label}
+    return h, data
+
+
+def _best_start(system, data, starts, n_jobs):
+    """The fits from every start side by side: the label and fit of the lowest training cost and how many
+    starts agreed with it (ended within :data:`AGREE` of its cost); the first error when every fit failed."""
     outcomes = run_forked(_fit_from, [(system, data, start) for _, start in starts], n_jobs)
     fits = [(label, fit) for (label, _), (fit, _) in zip(starts, outcomes, strict=True) if fit is not None]
     if not fits:
@@ -71,13 +94,12 @@ def fit_nominal(system, data, n_jobs: int = 1) -> tuple[Scored, Data]:
     w = dict(fits[0][1].weights)  # every start's residual measured with the same weights
     costs = [sum(float(np.sum(np.asarray(f.residuals[ch]) ** 2)) * w[ch] ** 2 for ch in data.outputs) for _, f in fits]
     k = int(np.argmin(costs))
-    label, fit = fits[k]
-    agreed = sum(1 for c in costs if c <= costs[k] * (1 + AGREE) + 1e-300)
-    data = replace(data, weights=dict(fit.weights)) if data.weights is not None else data
-    h = score("nominal", system, fit.values, fit.x0, len(data.free), data, seconds=time.perf_counter() - t0,
-              train_residuals=fit.residuals)
-    h.starts = {"tried": len(starts), "agreed": agreed, "best": label}
-    return h, data
+    return fits[k][0], fits[k][1], sum(1 for c in costs if c <= costs[k] * (1 + AGREE) + 1e-300)
+
+
+def _state_dict(system, x0) -> dict:
+    """The initial state a polish starts from when states are estimated: the window fit's."""
+    return dict(zip(system.state_names, map(float, np.asarray(x0, float)), strict=True))
 
 
 def global_starts(system, data, n: int) -> list[dict]:

@@ -150,7 +150,7 @@ def figure_hypotheses(d) -> bytes:
 
     hs = [h for h in d.hypotheses if h.ok]
     fig, ax = plt.subplots(figsize=(8, 0.3 * max(len(hs), 4) + 1))
-    gains = [100 * (d.nominal.validation_rss - h.validation_rss) / d.nominal.validation_rss for h in hs]
+    gains = [100 * _gain(d.nominal, h) for h in hs]  # against the model each extends, on the data it was scored on
     colors = ["tab:green" if any(h is a for a in d.accepted) else "tab:gray" for h in hs]
     ax.barh([h.label for h in hs][::-1], gains[::-1], color=colors[::-1])
     ax.axvline(100 * 0.01, color="k", lw=0.8, ls="--")

@@ -52,8 +52,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     n_jobs : int, optional
         Processes fitting hypotheses in parallel (default: the number of CPUs, at most 4).
     refit_top : int
-        Every hypothesis is first screened by a loose joint fit (a few evaluations); the ``refit_top``
-        most promising are then refitted to convergence (0: every hypothesis is fitted to convergence).
+        Every hypothesis is first screened by a loose joint fit (a few evaluations); of the ``refit_top``
+        most promising, the best and those whose screening pays for its new parameters
+        (:data:`~phs.workflows.diagnose.screening.REFIT_EVIDENCE`) are then refitted to convergence
+        (0: every hypothesis is fitted to convergence).
     progress : bool
         Print one line per fitted hypothesis on stderr.
     weights : None, "ml" or dict
@@ -211,7 +213,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
 
         if progress:
             print(f"diagnose {system.name}: a correction outside the library as the accepted effect's rival", file=sys.stderr, flush=True)
-        found = _discover(nominal, nominal, data0, noise, all_hyps, n_jobs=n_jobs, progress=progress)
+        need = 1 - (1 - RIVAL_MARGIN) * current.validation_rss / nominal.validation_rss if nominal.validation_rss > 0 else None
+        found = _discover(nominal, nominal, data0, noise, all_hyps, n_jobs=n_jobs, progress=progress, need=need)
         if _beats(found, current):
             rival, current, accepted, data = found, nominal, [], data0
         else:
@@ -253,7 +256,9 @@ and a correction found after them lowered the current channel's validation fit b
 RIVAL_MARGIN = 0.2
 """A correction found from the nominal model replaces an accepted library effect only when its validation
 residual is at least this share lower and its BIC at least ``MIN_BIC_GAIN`` lower than the library model's
-(the library's own acceptance rule, with a margin that keeps the library's name wherever it is as good)."""
+(the library's own acceptance rule, with a margin that keeps the library's name wherever it is as good).
+The rival's forward selection stops as soon as its remaining terms could not reach that residual even if
+each removed as much as the last one did (``select(need=...)``): a rival that cannot win is not refitted."""
 
 
 def _earns(with_library, alone) -> bool:

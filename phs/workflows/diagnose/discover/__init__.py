@@ -18,7 +18,8 @@ from phs.workflows.diagnose.discover.naming import RESEMBLES, describe, explaine
 from phs.workflows.diagnose.discover.selection import Discovery, select
 
 
-def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int = 1, progress: bool = False) -> Discovery:
+def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int = 1, progress: bool = False,
+             need: float | None = None) -> Discovery:
     """Select, fit and name a passive correction of the fitted model ``current``.
 
     Parameters
@@ -35,6 +36,9 @@ def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int 
         The fitted library hypotheses the correction is compared with.
     n_jobs, progress
         As for :func:`~phs.workflows.diagnose.diagnose`.
+    need : float, optional
+        The share of ``current``'s validation residual the correction must remove to matter
+        (:func:`~phs.workflows.diagnose.discover.selection.select`).
 
     Returns
     -------
@@ -43,7 +47,7 @@ def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int 
         (:func:`explained_share` against ``current``) and ``text`` (one paragraph) when a correction
         was found.
     """
-    d = select(current, data, n_jobs=n_jobs, progress=progress)
+    d = select(current, data, n_jobs=n_jobs, progress=progress, need=need)
     if d.found:
         d.described = describe(d.terms, d.values, current.system)
         d.similar = resemblance(d.scored, current, nominal, hypotheses, data)

@@ -71,17 +71,30 @@ def _residual_noise(model, ch, y, mask) -> float:
     return noise_level(r)
 
 
-def _signature(h, ref, data) -> np.ndarray | None:
+def _signature(h, ref, data) -> list | None:
+    """Per channel, what ``h`` changes in the validation outputs against ``ref`` (in units of the channel's
+    standard deviation), over the validation samples both were scored on: a screened hypothesis is scored
+    on the leading part of a separate validation recording only (:func:`~phs.workflows.diagnose.screening.screening_samples`)."""
     try:
         parts = []
         for ch in data.outputs:
             y = np.asarray(data.validation[ch], float)[data.val_mask]
-            a = np.asarray(h.simulated["validation"][ch], float)[data.val_mask]
-            b = np.asarray(ref.simulated["validation"][ch], float)[data.val_mask]
-            parts.append((a - b) / (float(np.std(y)) or 1.0))
-        return np.concatenate(parts)
+            a, b = np.asarray(h.simulated["validation"][ch], float), np.asarray(ref.simulated["validation"][ch], float)
+            m = min(len(a), len(b))
+            mask = np.asarray(data.val_mask)[:m]
+            parts.append((a[:m][mask] - b[:m][mask]) / (float(np.std(y)) or 1.0))
+        return parts
     except (KeyError, TypeError):
         return None
+
+
+def _cosine(a: list, b: list) -> float:
+    """Cosine between two per-channel signatures over the samples both hold."""
+    m = [min(len(x), len(y)) for x, y in zip(a, b, strict=True)]
+    u = np.concatenate([x[:k] for x, k in zip(a, m, strict=True)])
+    v = np.concatenate([y[:k] for y, k in zip(b, m, strict=True)])
+    nu, nv = float(np.linalg.norm(u)), float(np.linalg.norm(v))
+    return float(u @ v / (nu * nv)) if nu > 0 and nv > 0 else 0.0
 
 
 def resemblance(discovered, base, nominal, hypotheses, data) -> list[tuple[str, float]]:
@@ -99,16 +112,16 @@ def resemblance(discovered, base, nominal, hypotheses, data) -> list[tuple[str, 
     [('offset', 1.0)]
     """
     sig = _signature(discovered, base, data)
-    if sig is None or not np.any(sig):
+    if sig is None or not any(np.any(p) for p in sig):
         return []
     best = {}
     for h in hypotheses:
         if not h.ok or h.augmentation is None or h.no_improvement:
             continue
         other = _signature(h, nominal, data)
-        if other is None or not np.any(other):
+        if other is None or not any(np.any(p) for p in other):
             continue
-        cos = float(sig @ other / (np.linalg.norm(sig) * np.linalg.norm(other)))
+        cos = _cosine(sig, other)
         eff = h.augmentation.effect
         best[eff] = max(best.get(eff, -1.0), cos)
     return sorted(best.items(), key=lambda kv: -kv[1])

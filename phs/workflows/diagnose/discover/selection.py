@@ -234,13 +234,17 @@ def _x0(current, system) -> list:
 
 
 def _window(data, base):
-    """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples (the forward
-    selection's fits; validation scores stay on the whole validation recording); ``data`` itself when
-    short enough or when ``base`` ends in an input element (its transformed input belongs to the whole)."""
+    """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples and a separate
+    validation recording to its leading part (:func:`~phs.workflows.diagnose.screening.validation_samples`)
+    for the forward selection's fits; ``data`` itself when short enough or when ``base`` ends in an input
+    element (its transformed input belongs to the whole)."""
     aug = base.augmentation
     if (aug is not None and aug.element is not None) or data.train_mask is not None:
         return data
-    return data.head(MAX_SAMPLES)
+    from phs.workflows.diagnose.screening import validation_samples
+
+    n = len(data.recording)
+    return data.head(MAX_SAMPLES, validation_samples(base, data, None, MAX_SAMPLES / n) if n > MAX_SAMPLES else None)
 
 
 def _rescore(h, data):
@@ -263,6 +267,23 @@ def _refit(current, chosen, base, data, progress, joint=True):
     return full if full.ok and not full.no_improvement and full.rss <= current.rss and _passes(full) else current
 
 
+def _out_of_reach(start: float, before: float, after: float, steps_left: int, need: float) -> bool:
+    """Whether a forward selection whose last step lowered the validation residual from ``before`` to
+    ``after`` (``start`` before the first step) cannot remove ``need`` of ``start`` in ``steps_left`` more
+    steps, each removing at most what the last one did (a forward selection takes the largest gain first).
+
+    Examples
+    --------
+    >>> _out_of_reach(1.0, 1.0, 0.9, 2, 0.5)   # 10 % so far, at most 30 % in all
+    True
+    >>> _out_of_reach(1.0, 1.0, 0.7, 2, 0.5)   # 30 % so far, up to 90 %
+    False
+    """
+    if not (start > 0 and after <= before):
+        return False
+    return (start - after) + steps_left * (before - after) < need * start
+
+
 def _passes(h) -> bool:
     try:
         return bool(h.system.check().ok)
@@ -270,7 +291,8 @@ def _passes(h) -> bool:
         return False
 
 
-def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: int = MAX_TERMS, top: int = SCREEN_TOP) -> Discovery:
+def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: int = MAX_TERMS, top: int = SCREEN_TOP,
+           need: float | None = None) -> Discovery:
     """A sparse passive correction of the fitted model ``base`` (a :class:`~phs.workflows.diagnose.hypotheses.Scored`).
 
     Parameters
@@ -285,6 +307,11 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         One line per step on stderr.
     max_terms, top : int
         Most terms chosen; terms fitted by output error at each step.
+    need : float, optional
+        The share of ``base``'s validation residual a correction must remove to matter (a rival of an
+        accepted library effect, :data:`~phs.workflows.diagnose.run.RIVAL_MARGIN`): the forward selection
+        stops, with nothing found, as soon as the terms left could not reach it even if each added as
+        much as the last one did (:func:`_out_of_reach`).
 
     Returns
     -------
@@ -299,6 +326,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
     out = Discovery(base)
     full_data, data = data, _window(data, base)
     current, chosen = (base if data is full_data else _rescore(base, data)), []
+    start_rss = current.validation_rss
     for step in range(max_terms):
         ranked = screen(current, chosen, [t for t in terms if t not in chosen], data, base.system)
         if step == 0:
@@ -326,9 +354,14 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
             break
         by_label = {t.label: t for t in terms}  # in the order they were chosen (the heat states' order too)
         chosen = [by_label[lab] for lab in taken.augmentation.component.split(" + ")]
-        current = taken
+        previous, current = current, taken
         if progress:
             print(f"  discover: chose {', '.join(t.label for t in chosen)}", file=sys.stderr, flush=True)
+        if need is not None and _out_of_reach(start_rss, previous.validation_rss, current.validation_rss, max_terms - step - 1, need):
+            chosen = []
+            out.reason = (f"the terms left could not remove the {100 * need:.0f} % of the validation residual a rival of the "
+                          "accepted effect needs")
+            break
     if chosen:  # the chosen terms refitted on the whole training recording
         short = data is not full_data
         data = full_data
@@ -347,7 +380,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         final.reference_rss, final.reference_bic = base.validation_rss, base.bic
         final.label = f"discovered@{chosen[0].state}"
         out.scored, out.terms = final, tuple(chosen)
-    else:
+    elif not out.reason:
         out.reason = "no dictionary term lowered BIC and the validation residual enough" if out.steps or out.screened else \
             "no dictionary term could change the outputs"
     out.seconds = time.perf_counter() - wall
