@@ -14,7 +14,7 @@ from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick
 from phs.workflows.diagnose.result import Diagnosis, _verdict
-from phs.workflows.diagnose.screening import _refit_friction_rival, _screen_and_refit
+from phs.workflows.diagnose.screening import _refit_deferred, _refit_friction_rival, _screen_and_refit
 
 SPLIT = 0.7
 """Share of a single recording used for training when no validation recording is given."""
@@ -166,6 +166,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if round_ == 0:
             all_hyps = hyps
         pick = _pick(current, hyps, data_r)
+        if _refit_deferred(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
+            hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
+            pick = _pick(current, hyps, data_r)
         if _refit_friction_rival(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
             hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
             pick = _pick(current, hyps, data_r)

@@ -46,11 +46,46 @@ def _for_refit(h):
     """A screened hypothesis' augmentation, started from its screening values (inside the new parameters'
     bounds: a neutral point may lie outside them) for the joint refit."""
     aug = h.augmentation
+    if aug.element is not None:  # the element's search and the model's values start from the screening's
+        return replace(aug, starts=({**h.values, **h.element_values},))
     if aug.element is None:
         values = {k: v for k, v in h.values.items() if k in aug.system.param_names}
         values.update({k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) for k, v in values.items() if k in aug.bounds})
         aug = replace(aug, system=aug.system.with_params(values), starts=())
     return aug
+
+
+def _friction_loops(current, top, data) -> list:
+    """The hysteresis hypotheses among ``top`` whose screened loop closes in the pre-sliding regime of
+    friction (:func:`~phs.workflows.diagnose.ranking.presliding_share` below :data:`FRICTION_LIKE`) while
+    Coulomb friction at the same momentum is refitted too: when the friction is accepted they are the
+    same physics with more parameters (:func:`~phs.workflows.diagnose.ranking._pick`), so their refit
+    (a stiff pre-sliding state: 67 s of the 20 s LuGre case's 101) waits for the choice
+    (:func:`_refit_deferred`)."""
+    out = []
+    for h in top:
+        if h.augmentation.effect != "hysteresis":
+            continue
+        if not any(f.augmentation.effect == "coulomb_friction" and f.augmentation.attached_to == h.augmentation.attached_to for f in top):
+            continue
+        share = presliding_share(current, h, data)
+        if share is not None and share < FRICTION_LIKE:
+            out.append(h)
+    return out
+
+
+def _refit_deferred(current, hyps, pick, data, progress, label) -> bool:
+    """Refit the hypotheses whose refit waited for the choice (:func:`_friction_loops`) when the choice is
+    not the Coulomb friction at their place; whether any was refitted."""
+    waiting = [h for h in hyps if h.ok and h.deferred and h.stage != "full"]
+    if pick is not None and pick.augmentation.effect == "coulomb_friction":
+        waiting = [h for h in waiting if h.augmentation.attached_to != pick.augmentation.attached_to]
+    if not waiting:
+        return False
+    full = _run_all(current, [_for_refit(h) for h in waiting], data, len(waiting), progress, label + " deferred refit", ordered=True)
+    for h, f in zip(waiting, full, strict=True):
+        hyps[hyps.index(h)] = f
+    return True
 
 
 def _refit_friction_rival(current, hyps, pick, data, progress, label):
@@ -189,6 +224,10 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, n
         if h.ok and h.augmentation.effect not in seen and len(top) < refit_top and (not top or _evidence(base, h)):
             top.append(h)
             seen.add(h.augmentation.effect)
+    for h in _friction_loops(current, top, data):  # refitted only if the friction is not chosen
+        top.remove(h)
+        h.deferred = ("its screened loop closes in the pre-sliding regime of friction; refitted only if Coulomb friction "
+                      "at the same place is not chosen")
     # longest screening first: with fewer workers than refits the longest must not start last
     refits = [_for_refit(h) for h in sorted(top, key=lambda h: -h.seconds)]
     full = _run_all(current, refits, data, n_jobs, progress, label + " joint refit", ordered=True)
