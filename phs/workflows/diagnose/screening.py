@@ -157,15 +157,14 @@ def validation_samples(current, data, noise: dict | None, share: float) -> int:
     Examples
     --------
     >>> import numpy as np
-    >>> from types import SimpleNamespace
+    >>> from types import SimpleNamespace as NS
     >>> from phs.workflows.recording import Recording
-    >>> from phs.workflows.diagnose.hypotheses import Data
-    >>> t = np.arange(30000) * 1e-3
-    >>> rec = Recording.from_arrays(t, {"y": np.sin(t)})
-    >>> data = Data(rec, rec, np.ones(len(t), bool), None, ["y"], [], {}, [], None)
-    >>> late = SimpleNamespace(simulated={"validation": {"y": np.sin(t) - np.where(t > 25, 0.1, 0.0)}})
-    >>> validation_samples(SimpleNamespace(simulated={}), data, None, 1 / 3), validation_samples(late, data, None, 1 / 3)
-    (10000, 27274)
+    >>> val = Recording.from_arrays(np.arange(9000) * 1e-3, {"y": np.zeros(9000)})
+    >>> separate = NS(validation=val, train_mask=None, outputs=["y"], weights=None)
+    >>> split = NS(validation=val, train_mask=np.ones(9000, bool), outputs=["y"], weights=None)
+    >>> late = NS(simulated={"validation": {"y": np.where(np.arange(9000) > 8000, 0.1, 0.0)}})
+    >>> [validation_samples(NS(simulated={}), d, None, 1 / 3) for d in (separate, split)], validation_samples(late, separate, None, 1 / 3)
+    ([3000, 9000], 8472)
     """
     val = data.validation
     n = len(val)
