@@ -26,6 +26,10 @@ def test_friction_chosen_loop_not_refitted(friction):
     assert presliding_share(d.nominal, loop, d.data) < FRICTION_LIKE
     # the same physics as the chosen friction: not its rival, so the verdict is not capped by it
     assert loop.label in d.accepted[0].same_physics
+    # the JSON says why it stayed screened
+    doc = {h["effect"]: h for h in d.to_dict()["hypotheses"]}
+    assert doc["hysteresis"]["criterion"]["stage"] == "screening" and "pre-sliding" in doc["hysteresis"]["deferred"]
+    assert "deferred" not in doc["coulomb_friction"]
     # nothing waits when the choice is the friction at its place
     hyps = list(d.rounds[0])
     assert not _refit_deferred(d.nominal, hyps, d.accepted[0], d.data, False, "test")

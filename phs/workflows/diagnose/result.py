@@ -95,6 +95,7 @@ class Diagnosis:
                 "n_params": h.n_params, "accepted": any(h is a for a in self.accepted), "seconds": h.seconds,
                 "no_improvement": h.no_improvement, "undetermined": list(h.undetermined),
                 **({"error": h.error} if h.error else {}), **({"recovery": h.recovery} if h.recovery else {}),
+                **({"deferred": h.deferred} if h.deferred and h.stage != "full" else {}),
             }
 
         return {
