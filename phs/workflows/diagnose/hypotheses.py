@@ -492,10 +492,10 @@ def _element_search(cost, specs, theta, local: bool = False) -> list[float]:
         if local and grid[0] <= theta[k] <= grid[-1]:
             j = int(np.clip(np.searchsorted(grid, theta[k]), 1, len(grid) - 1))
             a, c = grid[j - 1], grid[j]
-            if theta[k] == a and j > 1:  # on a grid point: the intervals on both sides
-                a = grid[j - 2]
+            if theta[k] == c and j + 1 < len(grid):  # on a grid point: the intervals on both sides
+                c = grid[j + 1]
             r = scipy.optimize.minimize_scalar(f1, bounds=(a, c), method="bounded", options={"xatol": 1e-3 * (c - a), "maxiter": 8})
-            tol = 0.02 * (c - a)  # ending at an end of the bracket inside the range: the minimum may lie beyond it
+            tol = 0.1 * (c - a)  # ending near an end of the bracket inside the range: the minimum may lie beyond it
             if not ((r.x - a <= tol and a > grid[0]) or (c - r.x <= tol and c < grid[-1])):
                 if r.fun <= f1(theta[k]):
                     theta[k] = float(r.x)
