@@ -423,19 +423,12 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
 
         return cost
 
-    names = [f"{el.effect}.{sp[0]}" for sp in specs]
-    # a refit starts where its screening ended (:func:`~phs.workflows.diagnose.screening._for_refit`): the
-    # element's parameters searched near their screened values, the model's from the screened ones
-    begun = next((st for st in aug.starts if all(k in st for k in names)), None)
-    values = dict(nominal.values)
-    if begun is not None:
-        values.update({k: float(v) for k, v in begun.items() if k in values})
-    cost = cost_of(nominal.system.with_params(values), nominal.x0)
-    theta = _element_search(cost, specs, [float(begun[k]) for k in names] if begun else [s[1] for s in specs], local=begun is not None)
+    cost = cost_of(nominal.system, nominal.x0)
+    theta = _element_search(cost, specs, [s[1] for s in specs])
     neutral = el.neutral(rec.t, command(rec, where))
     if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
         theta = [float(v) for v in neutral]
-    x0, recovery = nominal.x0, ""
+    values, x0, recovery = dict(nominal.values), nominal.x0, ""
     if data.free or data.estimate_x0:  # refit the model through the element
         from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
@@ -458,7 +451,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             values, x0 = fit.values, fit.x0
             if not joint:
                 break
-            theta = _element_search(cost, specs, theta, local=True)
+            theta = _element_search(cost, specs, theta)
             after = cost(theta)
             if before - after <= ELEMENT_TOL * before:
                 break
@@ -470,12 +463,10 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     return _never_worse(nominal, h, aug, data, t0)
 
 
-def _element_search(cost, specs, theta, local: bool = False) -> list[float]:
+def _element_search(cost, specs, theta) -> list[float]:
     """Each of an input element's parameters in turn: a coarse grid over its range (log-spaced where the
     range is positive, with 0 when the range starts there), then a bounded refinement around the best grid
-    point; never ends above the cost of ``theta`` itself.  ``local``: the refinement only, between the grid
-    points around ``theta`` (the search of a later round of a joint fit, or of a refit from its screening),
-    falling back to the whole grid when it ends at the edge of that bracket."""
+    point; never ends above the cost of ``theta`` itself."""
     import scipy.optimize
 
     theta = [float(v) for v in theta]
@@ -489,17 +480,6 @@ def _element_search(cost, specs, theta, local: bool = False) -> list[float]:
             th[k] = v
             return cost(th)
 
-        if local and grid[0] <= theta[k] <= grid[-1]:
-            j = int(np.clip(np.searchsorted(grid, theta[k]), 1, len(grid) - 1))
-            a, c = grid[j - 1], grid[j]
-            if theta[k] == c and j + 1 < len(grid):  # on a grid point: the intervals on both sides
-                c = grid[j + 1]
-            r = scipy.optimize.minimize_scalar(f1, bounds=(a, c), method="bounded", options={"xatol": 1e-3 * (c - a), "maxiter": 8})
-            tol = 0.1 * (c - a)  # ending near an end of the bracket inside the range: the minimum may lie beyond it
-            if not ((r.x - a <= tol and a > grid[0]) or (c - r.x <= tol and c < grid[-1])):
-                if r.fun <= f1(theta[k]):
-                    theta[k] = float(r.x)
-                continue
         vals = [f1(g) for g in grid]
         b = int(np.argmin(vals))
         best, best_cost = float(grid[b]), vals[b]

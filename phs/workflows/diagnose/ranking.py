@@ -21,18 +21,19 @@ FAILED_FACTOR = 0.9
 """Each hypothesis whose fit failed (every retry included) multiplies the verdict's confidence by this:
 it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1."""
 CALIBRATION: dict = {
-    "effect": ((0.466, 0.75), (0.605, 0.879)),
+    "effect": ((0.4, 0.75), (0.525, 0.833), (0.611, 0.944)),
     "none": ((0.979, 0.3),),
 }
 """Knots ``(raw score, share of right verdicts)`` of the confidence's calibration, for verdicts naming an
 effect (``"effect"``) and for ``"none"``: isotonic regression of rightness on the raw score over the
 concealed cases (``bench/calibrate_confidence.py``: 80 diagnoses of the electrostatic actuator's
 concealed effects at 0.35, 0.6 and 1 times their tuned strength, two noise seeds, 3 s recordings, kept
-in ``bench/calibration_data.jsonl``).  On that set a verdict naming an effect was right 64 times in 72
-and the raw score says little beyond that (right 8 of 10 below 0.55, 56 of 62 above); a ``none`` was
-right 2 times in 8 (weak slew-rate limits and delays went undetected), so ``none`` means "nothing the
-library can detect in this recording", not "no missing physics".  The shares depend on the mix of
-cases a calibration set holds: they hold for effects of the library's kind, at these strengths."""
+in ``bench/calibration_data.jsonl``, collected with the screening, refit and deferral rules of
+``phs.workflows.diagnose.screening``).  On that set a verdict naming an effect was right 67 times in 72;
+the raw score says a little (right 13 of 15 below 0.55, 54 of 57 above); a ``none`` was right 2 times in
+8 (weak slew-rate limits and delays went undetected), so ``none`` means "nothing the library can detect
+in this recording", not "no missing physics".  The shares depend on the mix of cases a calibration set
+holds: they hold for effects of the library's kind, at these strengths."""
 SCREENED_CAP = 0.9
 """Highest confidence of a verdict while a rival that explains part of the mismatch was only screened
 (a loose fit: its gain after a fit to convergence is not known)."""

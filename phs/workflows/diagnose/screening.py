@@ -46,8 +46,6 @@ def _for_refit(h):
     """A screened hypothesis' augmentation, started from its screening values (inside the new parameters'
     bounds: a neutral point may lie outside them) for the joint refit."""
     aug = h.augmentation
-    if aug.element is not None:  # the element's search and the model's values start from the screening's
-        return replace(aug, starts=({**h.values, **h.element_values},))
     if aug.element is None:
         values = {k: v for k, v in h.values.items() if k in aug.system.param_names}
         values.update({k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) for k, v in values.items() if k in aug.bounds})
