@@ -63,7 +63,6 @@ def fit_nominal(system, data, n_jobs: int = 1) -> tuple[Scored, Data]:
     (2000, 2, 2)
     """
     from phs.workflows.diagnose.hypotheses import score
-
     from phs.workflows.diagnose.screening import leading_samples
 
     t0 = time.perf_counter()

@@ -10,8 +10,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import phs.workflows.diagnose.report as report
-from phs.workflows.diagnose.ranking import (FAILED_FACTOR, MIN_BIC_GAIN, MIN_VALIDATION_GAIN, SCREENED_CAP, _delta_bic, _gain,
-                                            calibrated, undetermined_effect)
+from phs.workflows.diagnose.ranking import (
+    FAILED_FACTOR,
+    MIN_BIC_GAIN,
+    MIN_VALIDATION_GAIN,
+    SCREENED_CAP,
+    _delta_bic,
+    _gain,
+    calibrated,
+    undetermined_effect,
+)
 
 if TYPE_CHECKING:
     from phs.system import PHSystem

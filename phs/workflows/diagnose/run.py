@@ -166,12 +166,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if round_ == 0:
             all_hyps = hyps
         pick = _pick(current, hyps, data_r)
-        if _refit_deferred(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
-            hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
-            pick = _pick(current, hyps, data_r)
-        if _refit_friction_rival(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
-            hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
-            pick = _pick(current, hyps, data_r)
+        for refit in (_refit_deferred, _refit_friction_rival):  # screened rivals the choice needs refitted
+            if refit(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
+                hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
+                pick = _pick(current, hyps, data_r)
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
             hyps.insert(0, pick)
@@ -194,7 +192,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     # automatically only when the library explains too little: an accepted effect that explains at least
     # DISCOVER_BELOW of the mismatch is the verdict, and a correction on top of it would blur it
     if discover or (discover is None and left and (not accepted or explained_share(nominal, current, data, noise) < DISCOVER_BELOW)):
-        from phs.workflows.diagnose.discover import discover as _discover, without_library
+        from phs.workflows.diagnose.discover import discover as _discover
+        from phs.workflows.diagnose.discover import without_library
 
         if progress:
             print(f"diagnose {system.name}: discovering a correction outside the library", file=sys.stderr, flush=True)

@@ -80,10 +80,15 @@ def _refit_deferred(current, hyps, pick, data, progress, label) -> bool:
         waiting = [h for h in waiting if h.augmentation.attached_to != pick.augmentation.attached_to]
     if not waiting:
         return False
-    full = _run_all(current, [_for_refit(h) for h in waiting], data, len(waiting), progress, label + " deferred refit", ordered=True)
-    for h, f in zip(waiting, full, strict=True):
-        hyps[hyps.index(h)] = f
+    _refit_in_place(current, hyps, waiting, data, progress, label + " deferred refit")
     return True
+
+
+def _refit_in_place(current, hyps, screened, data, progress, label) -> None:
+    """Refit the ``screened`` hypotheses jointly (side by side) and put each refit in its place in ``hyps``."""
+    full = _run_all(current, [_for_refit(h) for h in screened], data, len(screened), progress, label, ordered=True)
+    for h, f in zip(screened, full, strict=True):
+        hyps[hyps.index(h)] = f
 
 
 def _refit_friction_rival(current, hyps, pick, data, progress, label):
@@ -98,8 +103,7 @@ def _refit_friction_rival(current, hyps, pick, data, progress, label):
               and h.augmentation.attached_to == pick.augmentation.attached_to]
     if not rivals:
         return False
-    full = _run_all(current, [_for_refit(rivals[0])], data, 1, progress, label + " joint refit")[0]
-    hyps[hyps.index(rivals[0])] = full
+    _refit_in_place(current, hyps, rivals[:1], data, progress, label + " joint refit")
     return True
 
 
