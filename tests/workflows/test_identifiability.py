@@ -162,3 +162,22 @@ def test_intervals_cover_the_truth_at_the_nominal_rate_20_seeds():
 @pytest.mark.slow
 def test_intervals_cover_the_truth_at_the_nominal_rate_200_seeds():
     _check_coverage(_msd_fits(range(200)))
+
+
+def test_a_new_column_is_judged_beyond_the_others_numerical_rank():
+    """Columns 0 and 1 differ by 1e-6 along e2 (a direction below the rank threshold among themselves); the
+    new column 2 is 1e-4 along e2.  The whole Jacobian's null vector then has a component of 7e-3 on the new
+    parameter (the membership rule flags it), but what the data determine of the others is e1 alone, and
+    the new column stands 1e-4 out of it, ten times the threshold: determined beyond them.  A new column
+    that repeats one of the others is undetermined."""
+    from phs.workflows.identify.identifiability import analyse, undetermined_beyond, unidentified
+
+    e = np.eye(4)
+    J = np.column_stack([e[0], e[0] + 1e-6 * e[1], 1e-4 * e[1]])
+    _, P, _ = analyse(J, np.ones(3), 1e-5)
+    assert unidentified(P, 3).tolist() == [True, True, True]
+    R = np.linalg.qr(J, mode="r")
+    assert undetermined_beyond(R, [2], 1e-5).tolist() == [False]
+    J2 = np.column_stack([e[0], e[2], 3.0 * e[2]])
+    assert undetermined_beyond(np.linalg.qr(J2, mode="r"), [2], 1e-5).tolist() == [True]
+    assert undetermined_beyond(np.linalg.qr(J2, mode="r"), [0], 1e-5).tolist() == [False]

@@ -290,9 +290,13 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
 
 
 def undetermined(fit, names) -> list[str]:
-    """The parameters among ``names`` that the fit ``fit`` leaves undetermined: along a direction of the
-    free parameters that the data do not determine (an infinite 95 % interval,
-    :mod:`phs.workflows.identify.identifiability`), e.g. an added mass next to a free mass.
+    """The new parameters among ``names`` that the fit ``fit`` leaves undetermined beyond the nominal ones:
+    the data do not tell them apart from a re-adjustment of the nominal free parameters and estimated
+    states (:meth:`~phs.workflows.identify.result.IdentificationResult.undetermined_beyond`, a rank test
+    of their sensitivities with the nominal ones projected out), e.g. an added mass next to a free mass,
+    where only ``m (1 + μ)`` is determined.  A direction the nominal parameters already leave
+    undetermined among themselves does not make a new parameter undetermined.  A fit without its
+    Jacobian's factor falls back to the infinite 95 % intervals of its identifiability analysis.
 
     Examples
     --------
@@ -301,6 +305,8 @@ def undetermined(fit, names) -> list[str]:
     >>> undetermined(fit, ["mu", "k"])
     ['mu']
     """
+    if getattr(fit, "factor", None) is not None:
+        return fit.undetermined_beyond(names)
     intervals = getattr(fit, "intervals", None) or {}
     return [k for k in names if k in intervals and not all(math.isfinite(float(v)) for v in intervals[k])]
 

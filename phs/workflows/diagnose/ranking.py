@@ -81,10 +81,8 @@ def _accepted(nominal, h) -> bool:
 
 def undetermined_effect(h) -> bool:
     """Whether the identifiability analysis of ``h``'s fit puts every new parameter of ``h`` along a
-    direction the data do not determine (``Scored.undetermined``).  Reported, not a reason to refuse the
-    effect: the analysis counts a parameter as undetermined from a component of 1e-3 along such a
-    direction, and on the curling HASEL (whose nominal parameters already leave one undetermined) it
-    flags the charge retention that lowers the validation residual by 48 % (ΔBIC −709).
+    direction the data do not determine beyond the nominal ones (``Scored.undetermined``: a rank test of
+    their sensitivities with the nominal ones projected out).  Reported, not a reason to refuse the effect.
 
     Examples
     --------

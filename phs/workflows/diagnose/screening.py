@@ -216,8 +216,13 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, n
     short = data.head(m, validation_samples(current, data, noise, m / len(data.recording)))
     base = current
     if short is not data:  # the model the hypotheses extend, scored on the same window
-        base = score(current.label, current.system, current.values, current.x0, current.n_params, short,
-                     augmentation=current.augmentation, element_values=current.element_values)
+        from phs.workflows.diagnose.retry import RECOVERABLE
+
+        try:
+            base = score(current.label, current.system, current.values, current.x0, current.n_params, short,
+                         augmentation=current.augmentation, element_values=current.element_values)
+        except RECOVERABLE:  # its simulation on the window fails where the whole one passed: screen on the whole
+            short = data
     screened = _run_all(base, augs, short, n_jobs, progress, label + " screening", joint=False)
     screened.sort(key=lambda h: (not h.ok, -_gain(current, h)))
     top, seen = [], set()

@@ -122,6 +122,49 @@ def analyse(J: np.ndarray, D: np.ndarray, tol: float) -> tuple[np.ndarray, np.nd
     return D[:, None] * Hp * D[None, :], Vn @ Vn.T, int(keep.sum())
 
 
+def undetermined_beyond(R: np.ndarray, new: list[int], tol: float) -> np.ndarray:
+    """Whether each column ``new[k]`` of a Jacobian is undetermined *beyond* the other columns: after the
+    other columns' span (their numerical rank, singular values above ``tol`` times the largest of the
+    whole Jacobian) is projected out, the ``new`` columns leave a direction with a singular value below
+    that threshold, and the column has a component along it.
+
+    ``R`` is the triangular factor of the Jacobian in relative coordinates (``J D = Q R``: the same
+    geometry of the columns, ``n × n`` whatever the number of samples).  A direction that the other
+    columns already leave undetermined among themselves does not count: the question is whether the
+    data tell the ``new`` parameters apart from any re-adjustment of the others.
+
+    Examples
+    --------
+    >>> J = np.array([[1.0, 1.0, 0.0], [2.0, 2.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
+    >>> R = np.linalg.qr(J, mode="r")
+    >>> undetermined_beyond(R, [1], 1e-5).tolist()     # column 1 repeats column 0
+    [True]
+    >>> undetermined_beyond(R, [2], 1e-5).tolist()     # columns 0 and 1 leave a direction free among themselves
+    [False]
+    """
+    R = np.asarray(R, dtype=float)
+    n = R.shape[1]
+    new = [int(i) for i in new]
+    if not new:
+        return np.zeros(0, dtype=bool)
+    if R.size == 0 or not np.all(np.isfinite(R)):
+        return np.ones(len(new), dtype=bool)
+    s_all = np.linalg.svd(R, compute_uv=False)
+    top = float(s_all[0]) if s_all.size else 0.0
+    if top <= 0.0:
+        return np.ones(len(new), dtype=bool)
+    base = [i for i in range(n) if i not in new]
+    A = R[:, new]
+    if base:
+        U, sb, _ = np.linalg.svd(R[:, base], full_matrices=False)
+        Ub = U[:, sb > tol * top]
+        A = A - Ub @ (Ub.T @ A)
+    _, s, Vt = np.linalg.svd(A, full_matrices=True)
+    s = np.concatenate([s, np.zeros(len(new) - len(s))])
+    Vn = Vt[s <= tol * top]
+    return np.sum(Vn**2, axis=0) > _MEMBER**2
+
+
 def unidentified(P: np.ndarray, n_par: int) -> np.ndarray:
     """Whether each of the first ``n_par`` coordinates has a component along an unidentifiable
     direction (``P``: the projector on those directions).

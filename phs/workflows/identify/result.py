@@ -52,6 +52,35 @@ class IdentificationResult:
     # that are not identifiable separately (see :mod:`phs.workflows.identify.identifiability`)
     identifiable: list = field(default_factory=list)
     unidentifiable: list = field(default_factory=list)
+    # the triangular factor of the Jacobian in relative coordinates (``relative_factor``): columns the free
+    # parameters, then the estimated initial and window states
+    factor: np.ndarray | None = field(default=None, repr=False)
+    rtol: float = 1e-8
+
+    def undetermined_beyond(self, names) -> list[str]:
+        """The parameters among ``names`` that the data do not tell apart from a re-adjustment of the other
+        fitted parameters and estimated states: along a direction their sensitivities leave undetermined
+        once the others' span is projected out (:func:`~phs.workflows.identify.identifiability.undetermined_beyond`,
+        with the rank threshold of the fit's integration tolerance).  A direction the others leave
+        undetermined among themselves does not count.
+
+        Examples
+        --------
+        >>> from phs.workflows.bundled import recording_path
+        >>> from phs.workflows.recording import Recording
+        >>> from phs.workflows.identify import identify
+        >>> from systems.examples import mass_spring_damper
+        >>> fit = identify(mass_spring_damper(), Recording.from_csv(recording_path("msd_two_tone")), ["k.K", "b.b"])
+        >>> fit.undetermined_beyond(["b.b"])
+        []
+        """
+        from phs.workflows.identify.identifiability import rank_tolerance, undetermined_beyond
+
+        names = [k for k in names if k in self.free]
+        if self.factor is None or not names:
+            return []
+        flags = undetermined_beyond(self.factor, [self.free.index(k) for k in names], rank_tolerance(self.rtol))
+        return [k for k, f in zip(names, flags, strict=True) if f]
 
     @property
     def fitted_system(self) -> PHSystem:
@@ -196,6 +225,39 @@ class IdentificationResult:
         return fig
 
 
+def _relative_scale(n_col: int, values: dict, nominal, free: list, log_scaled: list) -> np.ndarray:
+    """Column scale ``D`` from the fit's coordinates to relative ones: ``p / nominal -> log |p|`` for a
+    linear parameter (``p / nominal``), 1 for log-scaled parameters and estimated states."""
+    n_par = len(free)
+    pv = np.array([values[k] for k in free], dtype=float)
+    nom = np.asarray(nominal, dtype=float)
+    D = np.ones(n_col)
+    lin = np.array([k not in log_scaled for k in free], dtype=bool)
+    ok = lin & (pv != 0) & (nom != 0)
+    D[:n_par][ok] = pv[ok] / nom[ok]
+    return D
+
+
+def relative_factor(J, values: dict, nominal, free: list, log_scaled: list) -> np.ndarray:
+    """The triangular factor ``R`` of the fit's Jacobian in relative coordinates (``J D = Q R``, ``D`` of
+    :func:`_relative_scale`): ``n × n`` for ``n`` fitted columns, it holds every angle and length between
+    the columns, so rank questions about any subset of them need no more than it
+    (:func:`~phs.workflows.identify.identifiability.undetermined_beyond`).
+
+    Examples
+    --------
+    >>> J = np.array([[1.0, 2.0], [0.0, 2.0], [0.0, 0.0]])
+    >>> np.round(np.abs(relative_factor(J, {"a": 1.0, "b": 2.0}, [1.0, 1.0], ["a", "b"], [])), 6).tolist()
+    [[1.0, 4.0], [0.0, 4.0]]
+    """
+    J = np.asarray(J, dtype=float)
+    Jr = J * _relative_scale(J.shape[1], values, nominal, free, log_scaled)
+    if Jr.size == 0 or not np.all(np.isfinite(Jr)):
+        return np.full((J.shape[1], J.shape[1]), np.nan)
+    R = np.linalg.qr(Jr, mode="r")
+    return np.vstack([R, np.zeros((J.shape[1] - R.shape[0], J.shape[1]))]) if R.shape[0] < J.shape[1] else R
+
+
 def _uncertainty(r, J, values: dict, nominal, free: list, log_scaled: list, n_channels: int = 1,
                  rtol: float = 1e-8, units: dict | None = None):
     """Standard errors, 95 % intervals, correlation matrix, strongly correlated pairs and the
@@ -214,12 +276,7 @@ def _uncertainty(r, J, values: dict, nominal, free: list, log_scaled: list, n_ch
     """
     n_res, n_col = len(r), J.shape[1]
     n_par = len(free)
-    pv = np.array([values[k] for k in free], dtype=float)
-    nom = np.asarray(nominal, dtype=float)
-    D = np.ones(n_col)
-    lin = np.array([k not in log_scaled for k in free], dtype=bool)
-    ok = lin & (pv != 0) & (nom != 0)
-    D[:n_par][ok] = pv[ok] / nom[ok]  # linear coordinate p / nominal -> log |p|
+    D = _relative_scale(n_col, values, nominal, free, log_scaled)
     Hp, P, rank = analyse(J, D, rank_tolerance(rtol))
     dof = n_res / max(n_res - rank, 1)
     B = np.zeros((n_col, n_col))

@@ -17,7 +17,7 @@ from codegen.simulator import Simulator, simulate
 from phs.errors import InputDataError, ParameterError, PHSError, SimulationError
 from phs.signals import Sampled
 from phs.workflows.identify.coordinates import _bounds, _channel_weights, _log_scaled, ml_weights
-from phs.workflows.identify.result import IdentificationResult, _uncertainty
+from phs.workflows.identify.result import IdentificationResult, _uncertainty, relative_factor
 from phs.workflows.identify.scoring import _simulate_outputs, nrmse_fit
 from phs.workflows.identify.sensitivities import _Problem
 
@@ -203,6 +203,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         iterations=int(nfev), seconds=_time.perf_counter() - wall, x0=x0_fit, outputs=outs, weights=w,
         log_scaled=log_scaled, message=str(sol.message), _recording=recording, compiled=prob.compiled,
         identifiable=ident, unidentifiable=unident,
+        factor=relative_factor(J, values, prob.nominal, free, log_scaled), rtol=rtol,
     )
     if validation is not None:
         result.validate(validation)

@@ -1,0 +1,41 @@
+"""A run whose integration fails is tried once more from the state with its vanishing components set to
+zero (``codegen.simulator.NEGLIGIBLE``): the curling HASEL fitted without its drift branch, driven by a
+0 / −4 kV square wave, decays at 0 V to charges near 1e-170 C, and CVODES restarted from that state at
+6.2 s fails with repeated right-hand-side errors, while it passes from zero charge."""
+
+import importlib
+
+import numpy as np
+import pytest
+
+from codegen import Simulator
+from phs.errors import SimulationError
+from phs.signals import Sampled, square
+from systems.curling_hasel import curling_hasel
+
+# the values a nominal fit of the curling HASEL ended with (docs/examples/diagnose_curling_hasel.py)
+VALUES = {"K_b": 0.047091880128233995, "b": 0.002934015144887044, "gamma1": 2.0000071232302155,
+          "gamma2": 7.847577277391551, "R2": 1409526.2220472675}
+simulator_module = importlib.import_module("codegen.simulator")  # the module (codegen.simulator is also a function)
+X0 = {"seg1.l_p": 0.015, "seg2.l_p": 0.015}
+
+
+def _run():
+    t = np.arange(6667) / 1000.0
+    U = np.asarray(square(-2000.0, 0.1, offset=-2000.0)(t), dtype=float)
+    sim = Simulator(curling_hasel(2, drift=False).with_params(VALUES), energy=False)
+    return sim.run(t, u={"U": Sampled(tuple(t), tuple(U))}, x0=X0)
+
+
+def test_a_failed_run_passes_from_its_vanishing_state_set_to_zero():
+    res = _run()
+    Q = np.asarray(res["seg1.Q2"])
+    assert np.all(np.isfinite(Q))
+    assert abs(Q[-1]) < 1e-12  # discharged at 0 V (C2 holds ~1e-6 C at -4 kV)
+    assert np.max(np.abs(Q)) > 1e-7
+
+
+def test_without_the_retry_the_same_run_fails(monkeypatch):
+    monkeypatch.setattr(simulator_module, "NEGLIGIBLE", 0.0)
+    with pytest.raises(SimulationError, match="between t=6.2"):
+        _run()
