@@ -56,7 +56,7 @@ def discover(current, nominal, data, noise: dict, hypotheses=(), *, n_jobs: int 
     return d
 
 
-def without_library(found, nominal, data, noise: dict, hypotheses=(), *, progress: bool = False):
+def without_library(found, nominal, data, noise: dict, hypotheses=(), *, progress: bool = False) -> Discovery | None:
     """The correction ``found`` (discovered after accepted library effects) refitted on the nominal model
     alone, named, as a :class:`Discovery`; None when its terms need a state only the library effects added
     or the refit does not improve on the nominal model.
