@@ -109,3 +109,34 @@ def test_resemblance_compares_a_screened_hypothesis_on_its_samples():
     found = run([0, 1, 0, 1, 5, 5, 5, 5])
     sim = dict(resemblance(found, run(np.zeros(8)), run(np.zeros(8)), [lib, other], data))
     assert sim["offset"] == pytest.approx(1.0) and sim["cubic_stiffness"] == pytest.approx(-1.0)
+
+
+def test_a_window_the_model_does_not_simulate_on_is_screened_whole(monkeypatch):
+    # the model the hypotheses extend fails to simulate on the leading windows (as the curling HASEL did
+    # once at 0 V): screening falls back to the whole recordings instead of stopping the diagnosis
+    import phs.workflows.diagnose.hypotheses as hyp
+    from phs.errors import SimulationError
+
+    t = np.arange(9000) * 2e-5
+    u = np.where((t % 0.02) > 0.01, 1.0, 0.0)
+    y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+    rng = np.random.default_rng(2)
+
+    def rec():
+        return Recording.from_arrays(t, {"U": u, "v_C": y + 1e-3 * rng.standard_normal(len(t))})
+
+    real = hyp.score
+    windows = []
+
+    def score(label, system, values, x0, n_params, data, **kw):
+        if label == "nominal" and len(data.recording) < len(t):
+            windows.append(len(data.recording))
+            raise SimulationError("simulation of 'rc': the integrator failed between t=0.05 and t=0.05002")
+        return real(label, system, values, x0, n_params, data, **kw)
+
+    monkeypatch.setattr(hyp, "score", score)
+    d = diagnose(rc_circuit(R=1.3e3), rec(), validation=rec(), free=["R.R"], n_jobs=1)
+    assert windows == [SCREEN_MIN_SAMPLES]  # the window was tried
+    assert d.effect == "offset"
+    screened = [h for h in d.hypotheses if h.ok and h.stage == "screening" and not h.no_improvement]
+    assert screened and {len(h.simulated["validation"]["v_C"]) for h in screened} == {len(t)}
