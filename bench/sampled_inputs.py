@@ -13,6 +13,16 @@ Both are compared with a run given the exact sine as an expression (rtol 1e-11):
 is printed relative to the peak.  Then an identification of ``k`` and ``b`` (from +20 % and +50 %)
 on a 1.5 s recording of the same drive runs under both rules.
 
+Then a piecewise-linear recorded drive (the concealed cases' steps, ``examples.concealed_effects``):
+
+* ``kinks``: the default (``Sampled.kinks``): a straight line between consecutive kinks, restarts at each;
+* ``windows``: the same samples through the step windows (``Sampled.kinks`` disabled), whose steps may
+  cross a kink;
+
+each at rtol 1e-7 against the default at rtol 1e-11 (the error of the current, which jumps at every
+step, relative to its spread), and ten runs of the drive delayed by 0.1 ms more each (as a search over
+an input element's parameter does: a new input every run).
+
     python bench/sampled_inputs.py            # 10 s simulations, median of 3 runs
     python bench/sampled_inputs.py --quick    # 2 s, one run
 
@@ -33,7 +43,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from codegen import simulate  # noqa: E402
+from codegen import Simulator, simulate  # noqa: E402
+from phs.signals import Sampled  # noqa: E402
 from phs.workflows.identify import identify  # noqa: E402
 from phs.workflows.recording import Recording  # noqa: E402
 from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
@@ -83,10 +94,45 @@ def main(argv=None) -> dict:
         res[rule]["identify_k"] = fit.values["k"]
         print(f"identify {rule:<8} {sec:8.3f} s  k = {fit.values['k']:.6g} (truth 50)", flush=True)
     simmod._STEP_FACTORS = FACTORS
+    res.update(_steps(seconds, repeats))
     out = {"seconds_simulated": seconds, **res,
            "ratio_simulate_linear_vs_windows": round(res["linear"]["simulate_seconds"] / res["windows"]["simulate_seconds"], 2),
-           "ratio_identify_linear_vs_windows": round(res["linear"]["identify_seconds"] / res["windows"]["identify_seconds"], 2)}
+           "ratio_identify_linear_vs_windows": round(res["linear"]["identify_seconds"] / res["windows"]["identify_seconds"], 2),
+           "ratio_steps_windows_vs_kinks": round(res["steps_windows"]["simulate_seconds"] / res["steps_kinks"]["simulate_seconds"], 2),
+           "ratio_delayed_windows_vs_kinks": round(res["steps_windows"]["ten_delayed_seconds"] / res["steps_kinks"]["ten_delayed_seconds"], 2)}
     print(json.dumps(out))
+    return out
+
+
+def _steps(seconds, repeats) -> dict:
+    """The piecewise-linear drive under both rules (see the module docstring)."""
+    from examples.concealed_effects import generate
+
+    s = electrostatic_actuator()
+    rec, _ = generate("none", seconds=seconds, seed=1)
+    t, U = rec.t, np.asarray(rec["U"])
+
+    def run(rtol, u=U, sim=None):
+        return (sim or Simulator(s, rtol=rtol, energy=False)).run(t, u={"U": Sampled(tuple(t), tuple(u))})["current"]
+
+    ref = run(1e-11)
+    spread = float(np.std(ref))
+    kinks, out = Sampled.kinks, {}
+    for rule in ("kinks", "windows"):
+        if rule == "windows":
+            Sampled.kinks = lambda self: None
+        try:
+            sim = Simulator(s, rtol=1e-7, energy=False)
+            run(1e-7, sim=sim)  # warm-up (integrator construction)
+            y, sec = timed(lambda sim=sim: run(1e-7, sim=sim), repeats)
+            delayed = [np.interp(t - 1e-4 * (k + 1), t, U) for k in range(10)]
+            _, ten = timed(lambda sim=sim, delayed=delayed: [run(1e-7, u=u, sim=sim) for u in delayed], 1)
+        finally:
+            Sampled.kinks = kinks
+        out[f"steps_{rule}"] = {"simulate_seconds": round(sec, 4), "ten_delayed_seconds": round(ten, 3),
+                                "current_error_of_spread": float(np.max(np.abs(y - ref)) / spread)}
+        print(f"steps    {rule:<8} {sec:8.3f} s  ten delayed {ten:6.2f} s  current error {out[f'steps_{rule}']['current_error_of_spread']:.2e} "
+              "of its spread", flush=True)
     return out
 
 

@@ -15,9 +15,8 @@ import hashlib
 import casadi as ca
 import numpy as np
 
-from codegen._inputs import input_signals, plan_segments
+from codegen._inputs import baked, input_signals, plan_segments
 from codegen._output import check_covered, energy_columns, output_runs
-from phs.signals import Sampled
 
 
 @dataclasses.dataclass
@@ -64,7 +63,7 @@ def plan_shape(sim, t: np.ndarray, u) -> Shape:
     """
     sigs = input_signals(sim.system, u, t)
     segs, slots = plan_segments(sigs, t)
-    sampled = [sg.arrays if isinstance(sg, Sampled) else None for sg in sigs]
+    sampled = [baked(sg) for sg in sigs]
     nt, nu = len(t), len(sigs)
     U = np.zeros((nt, nu))
     U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does

@@ -9,6 +9,8 @@ windows, each with the longest integration step its samples allow (:func:`step_w
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from phs.errors import InputDataError
@@ -85,16 +87,17 @@ def equal_runs(pts) -> list[tuple[float, float, int]]:
     [(0.0, 1.0, 3), (3.0, 0.5, 2)]
     """
     out = []
+    p = np.asarray(pts, dtype=float)
+    d = np.diff(p)
     i = 0
-    m = len(pts)
+    m = len(p)
     while i < m - 1:
-        h = pts[i + 1] - pts[i]
-        j = i + 1
-        while j < m - 1 and abs((pts[j + 1] - pts[j]) - h) <= 1e-9 * max(h, 1e-300) + 1e-12 * abs(pts[j]):
-            j += 1
+        h = d[i]
+        # the first interval after i that differs from h (beyond rounding) ends the run
+        off = np.abs(d[i + 1:] - h) > 1e-9 * max(h, 1e-300) + 1e-12 * np.abs(p[i + 1:m - 1])
+        j = i + 1 + (int(np.argmax(off)) if off.any() else m - 2 - i)
         n = j - i
-        h = (pts[j] - pts[i]) / n
-        out.append((pts[i], h, n))
+        out.append((float(p[i]), float((p[j] - p[i]) / n), n))
         i = j
     return out
 
@@ -161,8 +164,10 @@ def bounded_runs(runs, sigs):
     """Runs ``(start, step, n)`` cut into windows with their step bound ``(start, step, n, max_step)``.
 
     When inputs are sampled, the windows of :func:`step_windows`; one window bounded by one interval
-    when a sampled input is finer than the output grid; and unbounded runs (``max_step`` 1, unused)
-    without samples.
+    when a sampled input is finer than the output grid; unbounded runs (``max_step`` inf: linear
+    interpolation, no bound) when every sampled input is piecewise linear with few kinks
+    (:meth:`phs.signals.Sampled.kinks`, breakpoints of the segments the runs lie in); and unbounded runs
+    (``max_step`` 1, unused) without samples.
 
     Examples
     --------
@@ -170,9 +175,13 @@ def bounded_runs(runs, sigs):
     [(0.0, 0.5, 4, 1.0)]
     """
     samp = [sg for sg in sigs if isinstance(sg, Sampled)]
+    free = bool(samp) and all(sg.kinks() is not None for sg in samp)
     for ra, rh, rn in runs:
-        if not samp or any(float(np.min(np.diff(sg.times))) < rh * (1 - 1e-9) for sg in samp):
+        if not samp or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
             yield ra, rh, rn, 1.0
+            continue
+        if free:  # between two kinks of piecewise-linear inputs (their breakpoints): linear, the step is free
+            yield ra, rh, rn, math.inf
             continue
         tt = ra + rh * np.arange(rn + 1)
         for i0, i1, m in step_windows(np.column_stack([np.asarray(sg(tt), dtype=float) for sg in samp])):

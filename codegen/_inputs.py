@@ -143,8 +143,36 @@ def input_template(expr: sp.Expr):
     return key, tmpl, [float(f) for f in floats]
 
 
+_LINEAR = (lambda tmpl: (sp.srepr(tmpl), tmpl, 2))(sp.Symbol("_c0", real=True) + sp.Symbol("_c1", real=True) * TIME)
+"""The template of a piecewise-linear sampled input between two kinks: ``_c0 + _c1 t``."""
+
+
+def baked(sg):
+    """How a sampled input enters the integrator: ``(times, values)`` baked into an interpolant, or None
+    when it is piecewise linear with few kinks (:meth:`phs.signals.Sampled.kinks`), which enters as a
+    straight line between consecutive kinks (its breakpoints), its two constants in the integrator's
+    parameters: the integrators then serve any such input, and a step never crosses a kink.  None also
+    for an input that is not sampled.
+
+    Examples
+    --------
+    >>> t = np.arange(5) * 0.1
+    >>> baked(Sampled(tuple(t), (0.0, 0.0, 1.0, 1.0, 1.0))) is None
+    True
+    >>> len(baked(Sampled(tuple(np.arange(100) * 0.1), tuple(np.sin(np.arange(100.0))))))
+    2
+    """
+    if not isinstance(sg, Sampled) or sg.kinks() is not None:
+        return None
+    return sg.arrays
+
+
 def plan_segments(sigs, t):
     """Segments between the inputs' breakpoints on ``[t[0], t[-1]]`` and the input templates they use.
+
+    A sampled input that is piecewise linear with few kinks (:meth:`phs.signals.Sampled.kinks`: a step,
+    staircase or square wave as recorded) has its kinks as breakpoints: the integrator restarts there
+    instead of stepping across one (:func:`codegen._grid.bounded_runs` then leaves the step free).
 
     Returns ``(segs, slots)``: ``segs`` a list of ``(a, b, choice)`` with ``choice[j]`` the index of
     input ``j``'s template in ``slots[j]`` and its constants (None for a sampled input), ``slots[j]``
@@ -158,9 +186,13 @@ def plan_segments(sigs, t):
     [(0.0, 0.5, [(0, [0.0])]), (0.5, 1.0, [(0, [1.0])])]
     """
     t0, t1 = float(t[0]), float(t[-1])
-    bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)})
+    bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)}
+                 | {float(b) for s in sigs if baked(s) is None and isinstance(s, Sampled) for b in s.kinks()})
     edges = [t0] + [b for b in bps if t0 < b < t1] + [t1]
     slots: list[list] = [[] for _ in sigs]  # per input: list of (key, template, n_constants)
+    for j, s in enumerate(sigs):
+        if isinstance(s, Sampled) and baked(s) is None:
+            slots[j].append(_LINEAR)
     segs = []
     for a, b in zip(edges[:-1], edges[1:]):
         if b <= a:
@@ -168,7 +200,12 @@ def plan_segments(sigs, t):
         choice = []
         for j, s in enumerate(sigs):
             if isinstance(s, Sampled):
-                choice.append(None)
+                if baked(s) is None:  # linear between its kinks: u(a) + slope (t - a), numerically
+                    ua, ub = float(s(a)), float(s(b))
+                    slope = (ub - ua) / (b - a)
+                    choice.append((0, [ua - slope * a, slope]))
+                else:
+                    choice.append(None)
                 continue
             key, tmpl, vals = input_template(sp.sympify(s.expr_on(a, b)))
             keys = [k for k, _, _ in slots[j]]
@@ -196,7 +233,7 @@ def segment_inputs(sigs, slots, choice, times, cache: dict) -> np.ndarray:
     """
     out = np.empty((len(times), len(sigs)))
     for j, sg in enumerate(sigs):
-        if isinstance(sg, Sampled):
+        if isinstance(sg, Sampled):  # the samples themselves (a piecewise-linear one too: the same values)
             out[:, j] = sg(times)
             continue
         k, vals = choice[j]

@@ -29,6 +29,7 @@ the collection of integrator outputs on the grid (:mod:`codegen._output`).
 from __future__ import annotations
 
 import hashlib
+import math
 import time as _time
 
 import casadi as ca
@@ -37,7 +38,7 @@ import sympy as sp
 
 from codegen._domain import DomainCheck, fmt_state
 from codegen._grid import step_windows, time_grid
-from codegen._inputs import initial_state, input_signals, plan_segments, segment_inputs
+from codegen._inputs import baked, initial_state, input_signals, plan_segments, segment_inputs
 from codegen._output import call_into_numpy, energy_accounts, energy_columns, output_runs
 from codegen.discrete_gradient import discrete_gradient_simulate
 from codegen.functions import _model_hash, generate
@@ -45,7 +46,6 @@ from codegen.results import SimulationResult
 from codegen.translate import Translator
 from phs.errors import InputDataError, SimulationError
 from phs.params import TIME
-from phs.signals import Sampled
 
 __all__ = ["simulate", "simulator", "Simulator", "step_windows"]
 
@@ -83,6 +83,11 @@ def simulator(system, rtol: float = 1e-8, atol: float | None = None, max_steps: 
     (11,)
     """
     return Simulator(system, rtol=rtol, atol=atol, max_steps=max_steps, compile=compile, energy=energy)
+
+
+def _digest(g) -> str:
+    """A digest of sampled times and values ``g`` (the key of the integrators that interpolate them)."""
+    return hashlib.sha1(np.ascontiguousarray(g[0]).tobytes() + np.ascontiguousarray(g[1]).tobytes()).hexdigest()
 
 
 NEGLIGIBLE = 1e-100
@@ -153,8 +158,7 @@ class Simulator:
         is bounded by ``max_step`` output intervals (see :func:`step_windows`).
         """
         key = (n, float(max_step), tuple(tuple(k for k, _, _ in sl) for sl in slots),
-               tuple(hashlib.sha1(np.ascontiguousarray(g[0]).tobytes() + np.ascontiguousarray(g[1]).tobytes()).hexdigest()
-                     if g is not None else None for g in sampled))
+               tuple((g[2] if len(g) > 2 else _digest(g)) if g is not None else None for g in sampled))
         hit = self._integrators.get(key)
         if hit is not None:
             return hit
@@ -170,10 +174,10 @@ class Simulator:
         layout = []
         for j in range(nu):
             if sampled[j] is not None:
-                grid, values = sampled[j]
+                grid, values = sampled[j][:2]
                 # in a smooth window a cubic spline through the same samples: without a kink at every
                 # sample CVODES steps across samples (5-15 times fewer steps on sines sampled at 1 kHz)
-                kind = "bspline" if max_step > 1 and len(grid) >= 8 else "linear"
+                kind = "bspline" if 1 < max_step < math.inf and len(grid) >= 8 else "linear"
                 interp = ca.interpolant(f"u{j}", kind, [np.asarray(grid, dtype=float)], np.asarray(values, dtype=float))
                 uexpr.append(interp(tt))
                 layout.append(("sampled", 0))
@@ -207,8 +211,9 @@ class Simulator:
             dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[2:]}|{self.scale.tolist()}")
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
                 "disable_internal_warnings": True, "show_eval_warnings": False}  # failures are reported as PHS errors instead
-        if any(g is not None for g in sampled):
+        if any(g is not None for g in sampled) and math.isfinite(max_step):
             # a sampled input may change after a long constant stretch: never step over a feature of it
+            # (between the kinks of a piecewise-linear input, its breakpoints, there is none)
             opts["max_step_size"] = float(max_step)
         opts.update(self.integrator_options)
         F = ca.integrator(f"{self.f.rhs.name()}_cvodes{n}", "cvodes", dae, 0.0, np.arange(1.0, n + 1.0), opts)
@@ -255,7 +260,8 @@ class Simulator:
         segs, slots = plan_segments(sigs, t)
         if len(x) == 0:  # a static network: nothing to integrate, outputs follow the inputs
             return self._static_result(t, sigs, segs, slots, p, wall)
-        sampled = [sg.arrays if isinstance(sg, Sampled) else None for sg in sigs]
+        # a sampled input's samples with their digest (computed once: the integrators are keyed by it)
+        sampled = [(*baked(sg), _digest(baked(sg))) if baked(sg) is not None else None for sg in sigs]
         nq = len(energy_columns(s)) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))

@@ -20,35 +20,7 @@ import sympy as sp
 
 from phs.errors import InputDataError
 from phs.params import TIME
-from phs.signals import Sampled, Signal
-
-
-def linear_kinks(values, times=None) -> list[int]:
-    """Sample indices where sampled values change slope: the kinks of their linear interpolant (a change
-    of slope times the shorter neighbouring interval above 1e-12 of the largest magnitude, i.e. rounding).
-
-    ``values`` is (n,) or (n, k) (a kink of any column counts); ``times`` (n,) the sample times
-    (default: uniformly spaced).
-
-    Examples
-    --------
-    >>> linear_kinks([0.0, 0.0, 1.0, 2.0, 2.0])
-    [1, 3]
-    >>> linear_kinks([0.0, 1.0, 2.0], times=[0.0, 1.0, 3.0])   # the slope halves at the middle sample
-    [1]
-    """
-    U = np.asarray(values, dtype=float)
-    U = U.reshape(len(U), -1)
-    if U.size == 0 or len(U) < 3:
-        return []
-    tol = 1e-12 * max(float(np.max(np.abs(U))), 1e-300)
-    if times is None:
-        d2 = np.abs(U[2:] - 2 * U[1:-1] + U[:-2])
-    else:
-        h = np.diff(np.asarray(times, dtype=float))[:, None]
-        slope = np.diff(U, axis=0) / h
-        d2 = np.abs(np.diff(slope, axis=0)) * np.minimum(h[1:], h[:-1])
-    return sorted({int(k) + 1 for k in np.nonzero(np.any(d2 > tol, axis=1))[0]})
+from phs.signals import Sampled, Signal, linear_kinks  # noqa: F401 - linear_kinks is used and re-exported here
 
 
 @dataclass(frozen=True)

@@ -360,6 +360,38 @@ def exponential_chirp(amplitude: float, f0: float, f1: float, duration: float, o
     return Expression(sp.Float(offset) + sp.Float(amplitude) * sp.sin(phase))
 
 
+def linear_kinks(values, times=None) -> list[int]:
+    """Sample indices where sampled values change slope: the kinks of their linear interpolant (a change
+    of slope times the shorter neighbouring interval above 1e-12 of the largest magnitude, i.e. rounding).
+
+    ``values`` is (n,) or (n, k) (a kink of any column counts); ``times`` (n,) the sample times
+    (default: uniformly spaced).
+
+    Examples
+    --------
+    >>> linear_kinks([0.0, 0.0, 1.0, 2.0, 2.0])
+    [1, 3]
+    >>> linear_kinks([0.0, 1.0, 2.0], times=[0.0, 1.0, 3.0])   # the slope halves at the middle sample
+    [1]
+    """
+    U = np.asarray(values, dtype=float)
+    U = U.reshape(len(U), -1)
+    if U.size == 0 or len(U) < 3:
+        return []
+    tol = 1e-12 * max(float(np.max(np.abs(U))), 1e-300)
+    if times is None:
+        d2 = np.abs(U[2:] - 2 * U[1:-1] + U[:-2])
+    else:
+        h = np.diff(np.asarray(times, dtype=float))[:, None]
+        slope = np.diff(U, axis=0) / h
+        d2 = np.abs(np.diff(slope, axis=0)) * np.minimum(h[1:], h[:-1])
+    return sorted({int(k) + 1 for k in np.nonzero(np.any(d2 > tol, axis=1))[0]})
+
+
+KINK_SHARE = 0.05
+"""A sampled input counts as piecewise linear when its kinks are at most this share of its intervals (or 20)."""
+
+
 @dataclass(frozen=True)
 class Sampled(Signal):
     """Samples on a time grid, linearly interpolated (``hold="linear"``) or held (``"zoh"``).
@@ -397,6 +429,25 @@ class Sampled(Signal):
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """The sample times and values as float arrays (computed once)."""
         return self._t, self._v
+
+    def kinks(self) -> np.ndarray | None:
+        """The times of the linear interpolant's kinks (:func:`linear_kinks`) when it is piecewise linear
+        with few of them (at most :data:`KINK_SHARE` of the intervals, or 20): a step, staircase, square
+        wave or ramp table as sampled.  None for many kinks (a sine, noise) and for held samples.
+        Computed once.
+
+        Examples
+        --------
+        >>> Sampled((0.0, 0.1, 0.2, 0.3), (0.0, 0.0, 1.0, 1.0)).kinks().tolist()
+        [0.1, 0.2]
+        >>> Sampled((0.0, 0.1, 0.2, 0.3), (0.0, 0.0, 1.0, 1.0), hold="zoh").kinks() is None
+        True
+        """
+        if "_kinks" not in self.__dict__:
+            k = linear_kinks(self._v, self._t) if self.hold == "linear" else None
+            few = k is not None and len(k) <= max(20, KINK_SHARE * (len(self._v) - 1))
+            object.__setattr__(self, "_kinks", self._t[k] if few else None)
+        return self.__dict__["_kinks"]
 
     def __call__(self, tt):
         tt = np.asarray(tt, dtype=float)

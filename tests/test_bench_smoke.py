@@ -37,3 +37,6 @@ def test_sampled_inputs_benchmark_windows_are_closer_to_the_signal():
     for rule in ("windows", "linear"):
         assert abs(figures[rule]["identify_k"] - 50.0) <= 5e-3
         assert figures[rule]["simulate_seconds"] > 0 and figures[rule]["identify_seconds"] > 0
+    # a piecewise-linear drive: restarts at its kinks follow the tight run at least as well as the windows
+    assert figures["steps_kinks"]["current_error_of_spread"] <= figures["steps_windows"]["current_error_of_spread"]
+    assert figures["steps_kinks"]["current_error_of_spread"] < 1e-3
