@@ -99,7 +99,8 @@ def main(argv=None) -> dict:
            "ratio_simulate_linear_vs_windows": round(res["linear"]["simulate_seconds"] / res["windows"]["simulate_seconds"], 2),
            "ratio_identify_linear_vs_windows": round(res["linear"]["identify_seconds"] / res["windows"]["identify_seconds"], 2),
            "ratio_steps_windows_vs_kinks": round(res["steps_windows"]["simulate_seconds"] / res["steps_kinks"]["simulate_seconds"], 2),
-           "ratio_delayed_windows_vs_kinks": round(res["steps_windows"]["ten_delayed_seconds"] / res["steps_kinks"]["ten_delayed_seconds"], 2)}
+           "ratio_delayed_windows_vs_kinks": round(res["steps_windows"]["ten_delayed_seconds"]
+                                                   / res["steps_kinks"]["ten_delayed_seconds"], 2)}
     print(json.dumps(out))
     return out
 
@@ -131,8 +132,8 @@ def _steps(seconds, repeats) -> dict:
             Sampled.kinks = kinks
         out[f"steps_{rule}"] = {"simulate_seconds": round(sec, 4), "ten_delayed_seconds": round(ten, 3),
                                 "current_error_of_spread": float(np.max(np.abs(y - ref)) / spread)}
-        print(f"steps    {rule:<8} {sec:8.3f} s  ten delayed {ten:6.2f} s  current error {out[f'steps_{rule}']['current_error_of_spread']:.2e} "
-              "of its spread", flush=True)
+        err = out[f"steps_{rule}"]["current_error_of_spread"]
+        print(f"steps    {rule:<8} {sec:8.3f} s  ten delayed {ten:6.2f} s  current error {err:.2e} of its spread", flush=True)
     return out
 
 
