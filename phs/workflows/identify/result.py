@@ -66,13 +66,16 @@ class IdentificationResult:
 
         Examples
         --------
-        >>> from phs.workflows.bundled import recording_path
-        >>> from phs.workflows.recording import Recording
+        >>> import numpy as np
+        >>> from codegen import simulate
         >>> from phs.workflows.identify import identify
-        >>> from systems.examples import mass_spring_damper
-        >>> fit = identify(mass_spring_damper(), Recording.from_csv(recording_path("msd_two_tone")), ["k.K", "b.b"])
-        >>> fit.undetermined_beyond(["b.b"])
-        []
+        >>> from phs.workflows.recording import Recording
+        >>> from systems.examples import rc_circuit
+        >>> t = np.linspace(0, 0.01, 401); u = np.where((t % 0.004) < 0.002, 1.0, -0.5)
+        >>> rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc_circuit(), t, u={"U": u})["v_C"]})
+        >>> fit = identify(rc_circuit(R=1.2e3), rec, ["R.R", "C.C"])   # v_C determines R C only
+        >>> fit.undetermined_beyond(["C.C"]), identify(rc_circuit(R=1.2e3), rec, ["R.R"]).undetermined_beyond(["R.R"])
+        (['C.C'], [])
         """
         from phs.workflows.identify.identifiability import rank_tolerance, undetermined_beyond
 

@@ -19,7 +19,7 @@ import sympy as sp
 from codegen.functions import _model_hash, generate
 from codegen.simulator import Simulator, step_windows
 from phs.params import TIME
-from phs.piecewise_linear import linear_kinks
+from phs.signals import KINK_SHARE, linear_kinks
 from phs.workflows.identify.c_library import _Library
 
 # compile by default when the fit is large: samples x (1 + directions) x the dynamics' size above this
@@ -96,7 +96,7 @@ class _Problem:
         # steps in between; otherwise it is interpolated and the step bounded by the sample interval
         # (in windows whose step bound follows the input's smoothness: see ``step_windows``)
         kinks = linear_kinks(U)
-        piecewise = nu > 0 and len(kinks) <= max(20, (N - 1) // 20)
+        piecewise = nu > 0 and len(kinks) <= max(20, KINK_SHARE * (N - 1))  # the simulator's rule (Sampled.kinks)
         windows = step_windows(U) if nu > 0 and not piecewise else []
         cuts = sorted(set(self.ms_edges) | (set(kinks) if piecewise else {w[0] for w in windows}))
         bound = np.ones(N)  # the step bound of the window each sample interval belongs to
