@@ -9,8 +9,6 @@ windows, each with the longest integration step its samples allow (:func:`step_w
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from phs.errors import InputDataError
@@ -164,10 +162,10 @@ def bounded_runs(runs, sigs):
     """Runs ``(start, step, n)`` cut into windows with their step bound ``(start, step, n, max_step)``.
 
     When inputs are sampled, the windows of :func:`step_windows`; one window bounded by one interval
-    when a sampled input is finer than the output grid; unbounded runs (``max_step`` inf: linear
-    interpolation, no bound) when every sampled input is piecewise linear with few kinks
-    (:meth:`phs.signals.Sampled.kinks`, breakpoints of the segments the runs lie in); and unbounded runs
-    (``max_step`` 1, unused) without samples.
+    when a sampled input is finer than the output grid; and unbounded runs (``max_step`` 1, unused)
+    without samples, or when every sampled input is piecewise linear with few kinks
+    (:meth:`phs.signals.Sampled.kinks`: it enters as a line between its kinks, the segments' breakpoints,
+    not through an interpolant whose features would bound the step).
 
     Examples
     --------
@@ -175,13 +173,10 @@ def bounded_runs(runs, sigs):
     [(0.0, 0.5, 4, 1.0)]
     """
     samp = [sg for sg in sigs if isinstance(sg, Sampled)]
-    free = bool(samp) and all(sg.kinks() is not None for sg in samp)
+    interpolated = any(sg.kinks() is None for sg in samp)
     for ra, rh, rn in runs:
-        if not samp or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
+        if not interpolated or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
             yield ra, rh, rn, 1.0
-            continue
-        if free:  # between two kinks of piecewise-linear inputs (their breakpoints): linear, the step is free
-            yield ra, rh, rn, math.inf
             continue
         tt = ra + rh * np.arange(rn + 1)
         for i0, i1, m in step_windows(np.column_stack([np.asarray(sg(tt), dtype=float) for sg in samp])):

@@ -143,8 +143,10 @@ def input_template(expr: sp.Expr):
     return key, tmpl, [float(f) for f in floats]
 
 
-_LINEAR = (lambda tmpl: (sp.srepr(tmpl), tmpl, 2))(sp.Symbol("_c0", real=True) + sp.Symbol("_c1", real=True) * TIME)
-"""The template of a piecewise-linear sampled input between two kinks: ``_c0 + _c1 t``."""
+_LINE = sp.Symbol("_c0", real=True) + sp.Symbol("_c1", real=True) * TIME
+LINEAR_SLOT = (sp.srepr(_LINE), _LINE, 2)
+"""The input template of a straight line ``_c0 + _c1 t`` as a slot ``(key, template, n_constants)``: a
+piecewise-linear sampled input between two kinks (here and in identification's forward runs)."""
 
 
 def baked(sg):
@@ -187,12 +189,12 @@ def plan_segments(sigs, t):
     """
     t0, t1 = float(t[0]), float(t[-1])
     bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)}
-                 | {float(b) for s in sigs if baked(s) is None and isinstance(s, Sampled) for b in s.kinks()})
+                 | {float(b) for s in sigs if isinstance(s, Sampled) and baked(s) is None for b in s.kinks()})
     edges = [t0] + [b for b in bps if t0 < b < t1] + [t1]
     slots: list[list] = [[] for _ in sigs]  # per input: list of (key, template, n_constants)
     for j, s in enumerate(sigs):
         if isinstance(s, Sampled) and baked(s) is None:
-            slots[j].append(_LINEAR)
+            slots[j].append(LINEAR_SLOT)
     segs = []
     for a, b in zip(edges[:-1], edges[1:]):
         if b <= a:

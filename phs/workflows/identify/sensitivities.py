@@ -14,11 +14,10 @@ import shutil
 
 import casadi as ca
 import numpy as np
-import sympy as sp
 
+from codegen._inputs import LINEAR_SLOT
 from codegen.functions import _model_hash, generate
 from codegen.simulator import Simulator, step_windows
-from phs.params import TIME
 from phs.signals import KINK_SHARE, linear_kinks
 from phs.workflows.identify.c_library import _Library
 
@@ -148,10 +147,7 @@ class _Problem:
             sens = Simulator(system, rtol=rtol, atol=atol, energy=False, compile=self.compiled, compiler=compiler,
                              integrator_options={**opts, "nfwd": nd})
             self.scale = sim.scale
-            lin = "_c0 + _c1*t"
-            tmpl = sp.sympify(lin, locals={"t": TIME, "_c0": sp.Symbol("_c0", real=True),
-                                           "_c1": sp.Symbol("_c1", real=True)})
-            slots = [[(sp.srepr(tmpl), tmpl, 2)] for _ in range(nu)] if piecewise else [[] for _ in range(nu)]
+            slots = [[LINEAR_SLOT] for _ in range(nu)] if piecewise else [[] for _ in range(nu)]
             dt = t[1] - t[0]
             # segments: (first sample, last sample, integrator, sensitivity integrator, the integrator
             # parameters after p)
