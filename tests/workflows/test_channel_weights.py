@@ -54,3 +54,19 @@ def test_unknown_weighting_is_refused(control):
     rec, _ = control
     with pytest.raises(ParameterError, match="weights must be a dict of channel weights or 'ml', got 'max'"):
         identify(electrostatic_actuator(), rec, ["k"], weights="max")
+
+
+def test_ml_fit_started_from_its_own_weights_needs_no_reweighting(control):
+    rec, _ = control
+    first = identify(electrostatic_actuator(), rec, list(NOMINAL_FREE), weights="ml", rtol=1e-7)
+    again = identify(electrostatic_actuator().with_params(first.values), rec, list(NOMINAL_FREE), weights="ml",
+                     ml_start=dict(first.weights), rtol=1e-7)
+    one = identify(electrostatic_actuator().with_params(first.values), rec, list(NOMINAL_FREE),
+                   weights=dict(first.weights), rtol=1e-7)
+    # started at the weights it ends with, the maximum-likelihood fit is that one fit with those weights
+    assert again.iterations == one.iterations
+    assert again.weights == pytest.approx(first.weights, rel=0.1)
+    # from the default weights it needs re-weighting passes: the comparison above can fail
+    assert first.iterations > one.iterations
+    with pytest.raises(ParameterError, match="ml_start .* needs weights='ml'"):
+        identify(electrostatic_actuator(), rec, ["k"], ml_start=dict(first.weights))

@@ -430,7 +430,11 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         return cost
 
     cost = cost_of(nominal.system, nominal.x0)
-    theta = _element_search(cost, specs, [s[1] for s in specs])
+    if aug.starts:  # around a start (a refit's screened values), the whole grid when it does not hold
+        start = aug.starts[0]
+        theta = _element_search(cost, specs, [start.get(f"{el.effect}.{s[0]}", s[1]) for s in specs], local=True)
+    else:
+        theta = _element_search(cost, specs, [s[1] for s in specs])
     neutral = el.neutral(rec.t, command(rec, where))
     if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
         theta = [float(v) for v in neutral]
@@ -457,7 +461,9 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
             values, x0 = fit.values, fit.x0
             if not joint:
                 break
-            theta = _element_search(cost, specs, theta)
+            if before - refitted <= ELEMENT_TOL * before:  # the model hardly moved: neither will the element
+                break
+            theta = _element_search(cost, specs, theta, local=True)
             after = cost(theta)
             if before - after <= ELEMENT_TOL * before:
                 break
@@ -469,10 +475,13 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     return _never_worse(nominal, h, aug, data, t0)
 
 
-def _element_search(cost, specs, theta) -> list[float]:
+def _element_search(cost, specs, theta, local: bool = False) -> list[float]:
     """Each of an input element's parameters in turn: a coarse grid over its range (log-spaced where the
     range is positive, with 0 when the range starts there), then a bounded refinement around the best grid
-    point; never ends above the cost of ``theta`` itself."""
+    point; never ends above the cost of ``theta`` itself.  ``local``: the refinement only, between the grid
+    points either side of the point of the grid nearest ``theta`` (a later round of a joint fit, where the
+    model's refit moved the element's optimum a little); the whole grid when the refinement ends no lower
+    than both ends of that bracket (no valley inside it) or ``theta`` lies outside the grid."""
     import scipy.optimize
 
     theta = [float(v) for v in theta]
@@ -486,14 +495,26 @@ def _element_search(cost, specs, theta) -> list[float]:
             th[k] = v
             return cost(th)
 
-        vals = [f1(g) for g in grid]
-        b = int(np.argmin(vals))
-        best, best_cost = float(grid[b]), vals[b]
-        a, c = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
-        if c > a:
+        def refine(a, c):
             r = scipy.optimize.minimize_scalar(f1, bounds=(a, c), method="bounded", options={"xatol": 1e-3 * (c - a), "maxiter": 8})
-            if r.fun <= best_cost:
-                best, best_cost = float(r.x), float(r.fun)
-        if best_cost <= f1(theta[k]):
-            theta[k] = best
+            return float(r.x), float(r.fun)
+
+        best = None
+        if local and grid[1] <= theta[k] <= grid[-1]:
+            i = int(np.argmin(np.abs(grid - theta[k]))) if lo < 0 else int(np.argmin(np.abs(np.log(grid[1:] / theta[k])))) + 1
+            a, c = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+            x, fx = refine(a, c)
+            if fx < min(f1(a), f1(c)):  # below both ends: the bracket holds a valley
+                best = (x, fx)
+        if best is None:
+            vals = [f1(g) for g in grid]
+            b = int(np.argmin(vals))
+            best = (float(grid[b]), vals[b])
+            a, c = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
+            if c > a:
+                x, fx = refine(a, c)
+                if fx <= best[1]:
+                    best = (x, fx)
+        if best[1] <= f1(theta[k]):
+            theta[k] = best[0]
     return theta

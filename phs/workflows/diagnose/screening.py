@@ -44,13 +44,14 @@ def _expected_cost(aug) -> tuple:
 
 def _for_refit(h):
     """A screened hypothesis' augmentation, started from its screening values (inside the new parameters'
-    bounds: a neutral point may lie outside them) for the joint refit."""
+    bounds: a neutral point may lie outside them) for the joint refit; an input element's refit searches
+    first around its screened parameters (its only start)."""
     aug = h.augmentation
-    if aug.element is None:
-        values = {k: v for k, v in h.values.items() if k in aug.system.param_names}
-        values.update({k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) for k, v in values.items() if k in aug.bounds})
-        aug = replace(aug, system=aug.system.with_params(values), starts=())
-    return aug
+    if aug.element is not None:
+        return replace(aug, starts=(dict(h.element_values),) if h.element_values else ())
+    values = {k: v for k, v in h.values.items() if k in aug.system.param_names}
+    values.update({k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) for k, v in values.items() if k in aug.bounds})
+    return replace(aug, system=aug.system.with_params(values), starts=())
 
 
 def _friction_loops(current, top, data) -> list:

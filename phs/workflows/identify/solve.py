@@ -28,7 +28,7 @@ ML_PASSES = 3
 def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, weights=None, log_scale=None,
              estimate_x0=(), validation=None, initial=None, rtol: float = 1e-8, atol: float | None = None,
              max_iter: int = 100, ftol: float = 1e-8, shooting: int = 1, progress: bool = False,
-             compile: bool | None = None) -> IdentificationResult:
+             compile: bool | None = None, ml_start: dict | None = None) -> IdentificationResult:
     """Fit parameters ``free`` of ``system`` to ``recording`` by output error.
 
     Parameters
@@ -51,6 +51,10 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         :data:`~phs.workflows.identify.coordinates.CHANNEL_FLOOR` of its standard deviation; at most
         :data:`ML_PASSES` refits, until no weight moves by more than 10 %); the result's ``weights`` are
         the final ones.
+    ml_start : dict of str -> float, optional
+        With ``weights="ml"``: the weights of the first fit (default ``1 / std`` of each channel).  A fit
+        that continues an earlier one (the same model on more of the recording) starts from the weights
+        that one ended with and then usually needs no re-weighting pass.
     log_scale : sequence of str, optional
         Parameters fitted in log scale; default those whose declared range spans >= 1.5 decades.
     estimate_x0 : sequence of str
@@ -99,12 +103,15 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     >>> round(fit.values["R.R"])
     2000
     """
+    if ml_start is not None and weights != "ml":
+        raise ParameterError("identify: ml_start (the first fit's weights) needs weights='ml'")
     if isinstance(weights, str):
         if weights != "ml":
             raise ParameterError(f"identify: weights must be a dict of channel weights or 'ml', got {weights!r}")
         return _identify_ml(system, recording, free, bounds=bounds, x0=x0, outputs=outputs, log_scale=log_scale,
                             estimate_x0=estimate_x0, validation=validation, initial=initial, rtol=rtol, atol=atol,
-                            max_iter=max_iter, ftol=ftol, shooting=shooting, progress=progress, compile=compile)
+                            max_iter=max_iter, ftol=ftol, shooting=shooting, progress=progress, compile=compile,
+                            start=ml_start)
     wall = _time.perf_counter()
     free = list(free)
     if not free and not estimate_x0:
@@ -210,10 +217,11 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     return result
 
 
-def _identify_ml(system, recording, free, *, x0, outputs, initial, validation, **kw) -> IdentificationResult:
-    """``identify`` with maximum-likelihood channel weights (iteratively re-weighted, floored)."""
+def _identify_ml(system, recording, free, *, x0, outputs, initial, validation, start, **kw) -> IdentificationResult:
+    """``identify`` with maximum-likelihood channel weights (iteratively re-weighted, floored), the first
+    fit with the weights ``start`` (default ``1 / std``)."""
     wall = _time.perf_counter()
-    res = first = identify(system, recording, free, x0=x0, outputs=outputs, initial=initial, **kw)
+    res = first = identify(system, recording, free, x0=x0, outputs=outputs, initial=initial, weights=start, **kw)
     iterations = res.iterations
     for _ in range(ML_PASSES):
         w = ml_weights(res.residuals, recording, res.outputs)
