@@ -28,8 +28,8 @@ charge-retention case, left the truth out of the three refitted hypotheses (verd
 ``viscoelastic_creep``); 5 ranks it first there (``docs/workflows/diagnose.md``, step 4)."""
 
 SCREEN_RTOL = 1e-6
-"""Least relative tolerance of a screening fit's integration (a refit and every score integrate at the
-diagnosis's own ``rtol``).  On the 20 s concealed cases' actuator at its nominal fit (6667 samples),
+"""Least relative tolerance of a screening fit's integration (a refit integrates at the diagnosis's own
+``rtol``, every score at the simulator's 1e-8).  On the 20 s concealed cases' actuator at its nominal fit (6667 samples),
 against an rtol-1e-10 run: the residual within 6e-4 of its largest value (4e-5 at 1e-7, where the
 residual is mostly the noise, ~30 times larger than the discrepancy), the Jacobian's columns within
 4e-4; a Jacobian 1.4 times faster."""

@@ -58,6 +58,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         (0: every hypothesis is fitted to convergence).
     progress : bool
         Print one line per fitted hypothesis on stderr.
+    rtol : float
+        Relative tolerance of the fits' integration (screening fits at least
+        :data:`~phs.workflows.diagnose.hypotheses.SCREEN_RTOL`); scores are simulated at 1e-8.
     weights : None, "ml" or dict
         Channel weights of every fit and score.  None (default): ``1 / std`` of each measured channel
         (channels count alike whatever their units and noise).  ``"ml"``: maximum likelihood with one
