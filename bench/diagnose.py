@@ -7,7 +7,8 @@ recording of its own.  The closed-loop cases (``examples/concealed_loops.py``: a
 PD loop, the reference recorded as the input; dry friction read by a quantised encoder beside a
 noisy force channel, absorbed by the nominal damping, or with a hardening spring) are named
 ``loop:CASE``.  For every case the script runs ``phs.diagnose`` with every candidate, times it, and
-checks the verdict against the truth.  Target: 40 s per case on an idle 2-core machine.
+checks the verdict against the truth.  Target: 40 s per case on an idle 2-core machine, 60 s under load
+(other jobs running: a 1-min load average above the CPUs before the cases).
 
     python bench/diagnose.py                       # default cases, 20 s recordings
     python bench/diagnose.py --effects all         # every effect of both generators (long)
@@ -19,8 +20,10 @@ screening: every hypothesis fitted jointly to convergence (``refit_top=0``).
 
 The last line printed is one JSON object: ``seconds_per_case`` (mean), ``max_seconds``,
 ``verdict_correct`` (share of cases whose verdict names the truth's effect), ``cases`` (per case:
-seconds, verdict, expected, fit before/after on validation, the baseline's), ``speedup_vs_baseline``,
-``baseline_verdict_correct`` and ``same_verdicts_as_baseline``.
+seconds, verdict, expected, fit before/after on validation, ``load_before`` the 1-min load average as it
+started, the baseline's), ``load_before_max`` and ``cpus`` (to read the run against ``target_seconds``
+idle or ``target_seconds_loaded``), ``speedup_vs_baseline``, ``baseline_verdict_correct`` and
+``same_verdicts_as_baseline``.
 """
 
 from __future__ import annotations
@@ -85,7 +88,9 @@ def main(argv=None) -> dict:
         effects, seconds = ["charge_retention", "none"], 4.0
     cases = {}
     for e in effects:
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
         r = run_case(e, seconds, args.jobs)
+        r["load_before"] = None if load is None else round(load, 2)
         cases[e] = r
         print(f"{e:<24} {r['seconds']:7.1f} s  verdict {r['verdict']:<20} {'ok' if r['correct'] else 'WRONG'}  "
               f"validation fit {r['validation_fit_before']} -> {r['validation_fit_after']}", flush=True)
@@ -98,7 +103,9 @@ def main(argv=None) -> dict:
     secs = [c["seconds"] for c in cases.values()]
     out = {"seconds_per_case": round(sum(secs) / len(secs), 2), "max_seconds": max(secs),
            "verdict_correct": sum(c["correct"] for c in cases.values()) / len(cases), "recording_seconds": seconds,
-           "target_seconds": 40, "cases": cases}
+           "target_seconds": 40, "target_seconds_loaded": 60, "cpus": os.cpu_count(),
+           "load_before_max": max((c["load_before"] for c in cases.values() if c["load_before"] is not None), default=None),
+           "cases": cases}
     if not args.no_baseline:
         base = [c["baseline"]["seconds"] for c in cases.values()]
         out["baseline_seconds_per_case"] = round(sum(base) / len(base), 2)
