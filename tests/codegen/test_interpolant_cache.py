@@ -28,6 +28,13 @@ def test_cached_interpolant_gives_the_same_run_and_the_cache_is_bounded(monkeypa
     assert np.array_equal(np.asarray(again["v_C"]), np.asarray(rebuilt["v_C"]))
     assert set(fresh_cache) == set(SIM._INTERPOLANTS)
     assert np.all(np.isfinite(first))
+    # other samples while the cache holds the first ones: their own interpolant, not a cached one
+    other = np.cos(2 * np.pi * 120 * t)
+    cached = Simulator(rc_circuit(), energy=False).run(t, u={"U": other})["v_C"]
+    SIM._INTERPOLANTS.clear()
+    alone = Simulator(rc_circuit(), energy=False).run(t, u={"U": other})["v_C"]
+    assert np.array_equal(np.asarray(cached), np.asarray(alone))
+    assert not np.allclose(np.asarray(cached), np.asarray(first))
     monkeypatch.setattr(SIM, "_INTERPOLANTS_KEPT", 3)
     for k in range(5):
         v = np.full(8, float(k))

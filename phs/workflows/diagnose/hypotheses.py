@@ -253,10 +253,10 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
 
     t0 = time.perf_counter()
     label = f"{aug.effect}@{aug.attached_to}"
-    rtol = _fit_rtol(data, joint)
     try:
         if aug.element is not None:
             return _fit_input_element(nominal, aug, data, t0, joint, max_iter)
+        rtol = _fit_rtol(data, joint)
         system = aug.system.with_params({k: v for k, v in nominal.values.items() if k in aug.system.param_names})
         # screening fits the nominal parameters too (a new element often takes over part of what they
         # did: stiffness, damping), but loosely: it only has to rank the hypotheses
