@@ -23,6 +23,17 @@ each at rtol 1e-7 against the default at rtol 1e-11 (the error of the current, w
 step, relative to its spread), and ten runs of the drive delayed by 0.1 ms more each (as a search over
 an input element's parameter does: a new input every run).
 
+Then a mixed recorded drive (the concealed cases' validation drive: holds, a sine and a chirp, with
+jumps between them), at the diagnosis's scoring tolerance (rtol 1e-8) and at 1e-7:
+
+* ``pieces``: the default: lines over the holds (``Sampled.lines``), the step windows elsewhere, one
+  interval only next to a jump or a kink (``FINE_WINDOW``);
+* ``windows``: the previous rule: no lines, a rough window and both its neighbours at one interval
+  (``FINE_WINDOW`` = ``STEP_WINDOW``);
+
+each against itself at rtol 1e-11 (the current's error relative to its spread: the integration's error,
+not the difference between the two interpolants of the samples).
+
     python bench/sampled_inputs.py            # 10 s simulations, median of 3 runs
     python bench/sampled_inputs.py --quick    # 2 s, one run
 
@@ -95,12 +106,15 @@ def main(argv=None) -> dict:
         print(f"identify {rule:<8} {sec:8.3f} s  k = {fit.values['k']:.6g} (truth 50)", flush=True)
     simmod._STEP_FACTORS = FACTORS
     res.update(_steps(seconds, repeats))
+    res.update(_mixed(2 * seconds, repeats))
     out = {"seconds_simulated": seconds, **res,
            "ratio_simulate_linear_vs_windows": round(res["linear"]["simulate_seconds"] / res["windows"]["simulate_seconds"], 2),
            "ratio_identify_linear_vs_windows": round(res["linear"]["identify_seconds"] / res["windows"]["identify_seconds"], 2),
            "ratio_steps_windows_vs_kinks": round(res["steps_windows"]["simulate_seconds"] / res["steps_kinks"]["simulate_seconds"], 2),
            "ratio_delayed_windows_vs_kinks": round(res["steps_windows"]["ten_delayed_seconds"]
-                                                   / res["steps_kinks"]["ten_delayed_seconds"], 2)}
+                                                   / res["steps_kinks"]["ten_delayed_seconds"], 2),
+           **{f"ratio_mixed_windows_vs_pieces_rtol{r:.0e}": round(res["mixed_windows"][f"seconds_rtol{r:.0e}"]
+                                                               / res["mixed_pieces"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS}}
     print(json.dumps(out))
     return out
 
@@ -118,10 +132,11 @@ def _steps(seconds, repeats) -> dict:
 
     ref = run(1e-11)
     spread = float(np.std(ref))
-    kinks, out = Sampled.kinks, {}
+    kinks, lines, out = Sampled.kinks, Sampled.lines, {}
     for rule in ("kinks", "windows"):
         if rule == "windows":
             Sampled.kinks = lambda self: None
+            Sampled.lines = lambda self: np.zeros((0, 2))
         try:
             sim = Simulator(s, rtol=1e-7, energy=False)
             run(1e-7, sim=sim)  # warm-up (integrator construction)
@@ -129,11 +144,46 @@ def _steps(seconds, repeats) -> dict:
             delayed = [np.interp(t - 1e-4 * (k + 1), t, U) for k in range(10)]
             _, ten = timed(lambda sim=sim, delayed=delayed: [run(1e-7, u=u, sim=sim) for u in delayed], 1)
         finally:
-            Sampled.kinks = kinks
+            Sampled.kinks, Sampled.lines = kinks, lines
         out[f"steps_{rule}"] = {"simulate_seconds": round(sec, 4), "ten_delayed_seconds": round(ten, 3),
                                 "current_error_of_spread": float(np.max(np.abs(y - ref)) / spread)}
         err = out[f"steps_{rule}"]["current_error_of_spread"]
         print(f"steps    {rule:<8} {sec:8.3f} s  ten delayed {ten:6.2f} s  current error {err:.2e} of its spread", flush=True)
+    return out
+
+
+MIXED_RTOLS = (1e-8, 1e-7)
+
+
+def _mixed(seconds, repeats) -> dict:
+    """The mixed drive under both rules (see the module docstring)."""
+    from examples.concealed_effects import generate
+
+    s = electrostatic_actuator()
+    rec, _ = generate("none", seconds=seconds, seed=2, validation=True)
+    t, U = rec.t, np.asarray(rec["U"])
+
+    def run(sim):
+        return sim.run(t, u={"U": Sampled(tuple(t), tuple(U))})["current"]
+
+    lines, fine, out = Sampled.lines, simmod.FINE_WINDOW, {}
+    for rule in ("pieces", "windows"):
+        if rule == "windows":
+            Sampled.lines = lambda self: np.zeros((0, 2))
+            simmod.FINE_WINDOW = simmod.STEP_WINDOW
+        try:
+            out[f"mixed_{rule}"] = entry = {}
+            ref = run(Simulator(s, rtol=1e-11, energy=False))  # the rule's own interpolant: its integration error only
+            spread = float(np.std(ref))
+            for rtol in MIXED_RTOLS:
+                sim = Simulator(s, rtol=rtol, energy=False)
+                run(sim)  # warm-up (integrator construction)
+                y, sec = timed(lambda sim=sim: run(sim), repeats)
+                entry[f"seconds_rtol{rtol:.0e}"] = round(sec, 4)
+                entry[f"current_error_of_spread_rtol{rtol:.0e}"] = err = float(np.max(np.abs(y - ref)) / spread)
+                print(f"mixed    {rule:<8} {sec:8.3f} s at rtol {rtol:.0e}  current error {err:.2e} of its spread", flush=True)
+        finally:
+            Sampled.lines, simmod.FINE_WINDOW = lines, fine
     return out
 
 

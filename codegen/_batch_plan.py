@@ -15,7 +15,7 @@ import hashlib
 import casadi as ca
 import numpy as np
 
-from codegen._inputs import baked, input_signals, plan_segments
+from codegen._inputs import baked, input_signals, plan_segments, run_sampled
 from codegen._output import check_covered, energy_columns, output_runs
 
 
@@ -69,7 +69,7 @@ def plan_shape(sim, t: np.ndarray, u) -> Shape:
     U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does
     runs, steps, cs, t_off, u_off, key = [], [], [], [], [], []
     for r in output_runs(t, sigs, segs, lambda choice, times: sim._eval_inputs(sigs, slots, choice, times), U):
-        F, layout = sim._integrator(r.n, slots, sampled, r.max_step)
+        F, layout = sim._integrator(r.n, slots, run_sampled(sampled, r.choice), r.max_step)
         c = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
         r.store(U_check, r.u)
         t_off.extend(r.times[~r.on])

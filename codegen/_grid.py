@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from phs.errors import InputDataError
-from phs.signals import Sampled
+from phs.kinks import straight_stretches
 
 STEP_WINDOW = 200  # output intervals per window of a sampled input with its own step bound
 _STEP_FACTORS = (64, 32, 16, 8, 4, 2)
@@ -100,7 +100,34 @@ def equal_runs(pts) -> list[tuple[float, float, int]]:
     return out
 
 
-def step_windows(values, window: int = STEP_WINDOW) -> list[tuple[int, int, int]]:
+FINE_WINDOW = 25
+"""A window that is rough somewhere is examined again in windows of this many intervals, and a smooth window
+next to a rough one gives up this many of its intervals: one kink or jump in a smooth input costs the few
+intervals around it, not its window and both neighbours (600 intervals, at up to 50 CVODES steps each on a
+chirp).  A cubic spline's ringing from a kink decays by about 0.27 per sample: below 1e-14 after 25."""
+
+
+def _bound(w: np.ndarray, tol: np.ndarray) -> int:
+    """The step bound of one window ``w`` (points, columns): 1 unless every column is smooth to third order,
+    else the largest factor whose linear interpolation reproduces every point to within ``tol``."""
+    k = np.arange(len(w))
+    # smooth to third order: the second differences vary slowly (a sampled sine or chirp), not in
+    # spikes (the kinks of a piecewise-linear waveform table, a step, noise); a channel that
+    # follows the input's derivative (a capacitor's current) must see the kinks where they are
+    d2, d3 = np.abs(np.diff(w, 2, axis=0)), np.abs(np.diff(w, 3, axis=0))
+    if len(w) < 8 or not np.all(d3.max(axis=0, initial=0.0) <= 0.5 * d2.max(axis=0, initial=0.0) + 1e-12 * tol):
+        return 1
+    for m in _STEP_FACTORS:
+        if m >= len(w):
+            continue
+        idx = np.unique(np.append(np.arange(0, len(w), m), len(w) - 1))
+        err = max((np.max(np.abs(w[:, j] - np.interp(k, idx, w[idx, j]))) / tol[j] for j in range(w.shape[1])), default=0.0)
+        if err <= 1.0:
+            return m
+    return 1
+
+
+def step_windows(values, window: int = STEP_WINDOW, rough_ends=(False, False)) -> list[tuple[int, int, int]]:
     """Windows of a uniformly sampled input and the longest integration step each allows.
 
     ``values`` (n,) or (n, k): inputs at n equally spaced points.  Returns ``(i0, i1, m)``: points
@@ -108,14 +135,19 @@ def step_windows(values, window: int = STEP_WINDOW) -> list[tuple[int, int, int]
     that every input, linearly interpolated through every m-th point of the window, reproduces all
     its points to within 1 % of its range over the record; ``m`` is 1 where an input is not smooth to
     third order (its third differences exceed half its largest second difference: kinks of a
-    piecewise-linear table, steps, noise) and where a neighbouring window's ``m`` is 1.
+    piecewise-linear table, steps, noise) and over the :data:`FINE_WINDOW` intervals next to such a place.
+    A window that is rough somewhere is examined again in windows of :data:`FINE_WINDOW` intervals (a
+    smooth input with one jump keeps long steps up to a few samples from it); neighbouring windows with the
+    same bound are joined again, up to ``window`` intervals.
     A BDF step only evaluates the dynamics at its ends, so a step must not cross a feature of the
     input; steps of ``m`` intervals cross none (to 1 %).  In windows with ``m > 1`` the simulator
     interpolates the samples by a cubic spline instead of linearly: the linear interpolant's kink at
     every sample would otherwise hold CVODES to about a step per sample.  Smooth, finely sampled
     inputs (sines, chirps, slow ramps at 1 kHz) get long steps; an input that changes character at
     every sample (noise, multisines near the Nyquist frequency, a zero-order hold) keeps one interval
-    and its linear interpolation.
+    and its linear interpolation.  ``rough_ends``: whether what lies before the first point and after
+    the last is rough (a kink where the input's interpolant meets one of its straight stretches), so that
+    the first or last intervals keep one interval too.
 
     Examples
     --------
@@ -124,6 +156,10 @@ def step_windows(values, window: int = STEP_WINDOW) -> list[tuple[int, int, int]
     [8, 8, 8, 8, 8]
     >>> {w[2] for w in step_windows(np.random.default_rng(0).normal(size=1001))}
     {1}
+    >>> u = np.sin(2 * np.pi * 2 * t)
+    >>> u[500:] += 0.5                                               # a jump at point 500
+    >>> [w for w in step_windows(u) if w[2] == 1]                    # one interval near it only
+    [(450, 525, 1)]
     """
     V = np.asarray(values, dtype=float)
     V = V.reshape(len(V), -1)
@@ -132,52 +168,90 @@ def step_windows(values, window: int = STEP_WINDOW) -> list[tuple[int, int, int]
     out = []
     for i0 in range(0, max(n - 1, 0), window):
         i1 = min(i0 + window, n - 1)
-        w = V[i0: i1 + 1]
-        k = np.arange(len(w))
-        best = 1
-        # smooth to third order: the second differences vary slowly (a sampled sine or chirp), not in
-        # spikes (the kinks of a piecewise-linear waveform table, a step, noise); a channel that
-        # follows the input's derivative (a capacitor's current) must see the kinks where they are
-        d2, d3 = np.abs(np.diff(w, 2, axis=0)), np.abs(np.diff(w, 3, axis=0))
-        if len(w) < 8 or not np.all(d3.max(axis=0, initial=0.0) <= 0.5 * d2.max(axis=0, initial=0.0) + 1e-12 * tol):
-            out.append((i0, i1, 1))
+        m = _bound(V[i0: i1 + 1], tol)
+        if m == 1 and i1 - i0 > FINE_WINDOW:  # rough somewhere: where exactly
+            out += [(a, min(a + FINE_WINDOW, i1), _bound(V[a: min(a + FINE_WINDOW, i1) + 1], tol)) for a in range(i0, i1, FINE_WINDOW)]
+        else:
+            out.append((i0, i1, m))
+    # a spline through a rough window rings into its neighbours for a few samples: a smooth window next
+    # to a rough one keeps one interval (and the linear interpolant) over its FINE_WINDOW intervals there
+    rough = [rough_ends[0]] + [m == 1 for _, _, m in out] + [rough_ends[1]]
+    parts = []
+    for k, (a, b, m) in enumerate(out):
+        lo = a + FINE_WINDOW if m > 1 and rough[k] else a
+        hi = b - FINE_WINDOW if m > 1 and rough[k + 2] else b
+        if hi <= lo:
+            parts.append((a, b, 1))
             continue
-        for m in _STEP_FACTORS:
-            if m >= len(w):
-                continue
-            idx = np.unique(np.append(np.arange(0, len(w), m), len(w) - 1))
-            err = max((np.max(np.abs(w[:, j] - np.interp(k, idx, w[idx, j]))) / tol[j] for j in range(w.shape[1])), default=0.0)
-            if err <= 1.0:
-                best = m
-                break
-        out.append((i0, i1, best))
-    # a spline through a rough window rings into its neighbours for a few samples: a smooth window
-    # next to a rough one keeps one interval (and the linear interpolant)
-    rough = [m == 1 for _, _, m in out]
-    return [(a, b, 1 if (k > 0 and rough[k - 1]) or (k + 1 < len(out) and rough[k + 1]) else m)
-            for k, (a, b, m) in enumerate(out)]
+        parts += [(a, lo, 1)] if lo > a else []
+        parts.append((lo, hi, m))
+        parts += [(hi, b, 1)] if hi < b else []
+    joined: list[tuple[int, int, int]] = []
+    for a, b, m in parts:
+        if joined and joined[-1][2] == m and b - joined[-1][0] <= window:
+            joined[-1] = (joined[-1][0], b, m)
+        else:
+            joined.append((a, b, m))
+    return joined
 
 
-def bounded_runs(runs, sigs):
+def sampled_pieces(U, kinks, piecewise: bool) -> list[tuple[int, int, int]]:
+    """How inputs sampled on a uniform grid are integrated, as ``(i0, i1, m)``: from sample ``i0`` to ``i1``,
+    ``m`` 0 where every input is one straight line (enters as a line, exact, steps free), else the step bound
+    of a window through which the inputs are interpolated (:func:`step_windows`).
+
+    ``U`` (n, k): the inputs; ``kinks``: the samples where any of them changes slope
+    (:func:`phs.kinks.linear_kinks`); ``piecewise``: whether they are few (:data:`phs.kinks.KINK_SHARE`),
+    when the inputs are lines between consecutive kinks everywhere.  Otherwise the stretches of at least
+    :data:`phs.kinks.LINE_RUN` intervals between two kinks are lines and the rest is windowed, each
+    window next to a line keeping one interval at that end (the simulator's rule, input by input:
+    :func:`codegen._inputs.plan_segments`).
+
+    Examples
+    --------
+    >>> from phs.kinks import linear_kinks
+    >>> t = np.arange(301) * 1e-3
+    >>> u = np.where(t < 0.1, 0.0, np.sin(30 * (t - 0.1)))       # a hold, then a sine
+    >>> sampled_pieces(u[:, None], linear_kinks(u), False)[:3]
+    [(0, 100, 0), (100, 125, 1), (125, 300, 8)]
+    """
+    U = np.asarray(U, dtype=float).reshape(len(U), -1)
+    n = len(U)
+    if piecewise:
+        edges = sorted({0, n - 1} | {int(k) for k in kinks})
+        return [(a, b, 0) for a, b in zip(edges[:-1], edges[1:])]
+    lines = straight_stretches(kinks, n)
+    out: list[tuple[int, int, int]] = []
+    pos = 0
+    for a, b in lines + [(n - 1, n - 1)]:
+        if a > pos:  # interpolated from pos to a; a kink at either end where a line meets it
+            out += [(pos + i0, pos + i1, m) for i0, i1, m in step_windows(U[pos: a + 1], rough_ends=(pos > 0, a < n - 1))]
+        if b > a:
+            out.append((a, b, 0))
+        pos = max(pos, b)
+    return out
+
+
+def bounded_runs(runs, interpolated, rough_ends=(False, False)):
     """Runs ``(start, step, n)`` cut into windows with their step bound ``(start, step, n, max_step)``.
 
-    When inputs are sampled, the windows of :func:`step_windows`; one window bounded by one interval
-    when a sampled input is finer than the output grid; and unbounded runs (``max_step`` 1, unused)
-    without samples, or when every sampled input is piecewise linear with few kinks
-    (:meth:`phs.signals.Sampled.kinks`: it enters as a line between its kinks, the segments' breakpoints,
-    not through an interpolant whose features would bound the step).
+    ``interpolated``: the sampled inputs that enter the integrator through their interpolant on these runs.
+    With such inputs, the windows of :func:`step_windows` (``rough_ends`` passed on); one window bounded by
+    one interval when one of them is finer than the output grid; and unbounded runs (``max_step`` 1,
+    unused) without them: inputs that are not sampled, or sampled inputs that enter as lines between
+    their kinks, the segments' breakpoints (:meth:`phs.signals.Sampled.kinks`, :meth:`~phs.signals.Sampled.lines`),
+    not through an interpolant whose features would bound the step.
 
     Examples
     --------
     >>> list(bounded_runs([(0.0, 0.5, 4)], []))
     [(0.0, 0.5, 4, 1.0)]
     """
-    samp = [sg for sg in sigs if isinstance(sg, Sampled)]
-    interpolated = any(sg.kinks() is None for sg in samp)
+    samp = list(interpolated)
     for ra, rh, rn in runs:
-        if not interpolated or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
+        if not samp or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
             yield ra, rh, rn, 1.0
             continue
         tt = ra + rh * np.arange(rn + 1)
-        for i0, i1, m in step_windows(np.column_stack([np.asarray(sg(tt), dtype=float) for sg in samp])):
+        for i0, i1, m in step_windows(np.column_stack([np.asarray(sg(tt), dtype=float) for sg in samp]), rough_ends=rough_ends):
             yield ra + i0 * rh, rh, i1 - i0, float(m)

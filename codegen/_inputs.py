@@ -154,7 +154,9 @@ def baked(sg):
     when it is piecewise linear with few kinks (:meth:`phs.signals.Sampled.kinks`), which enters as a
     straight line between consecutive kinks (its breakpoints), its two constants in the integrator's
     parameters: the integrators then serve any such input, and a step never crosses a kink.  None also
-    for an input that is not sampled.
+    for an input that is not sampled.  An input with many kinks is baked even where it is a line over a
+    long stretch (:meth:`phs.signals.Sampled.lines`): the segments of :func:`plan_segments` say where the
+    interpolant is used.
 
     Examples
     --------
@@ -174,11 +176,14 @@ def plan_segments(sigs, t):
 
     A sampled input that is piecewise linear with few kinks (:meth:`phs.signals.Sampled.kinks`: a step,
     staircase or square wave as recorded) has its kinks as breakpoints: the integrator restarts there
-    instead of stepping across one (:func:`codegen._grid.bounded_runs` then leaves the step free).
+    instead of stepping across one (:func:`codegen._grid.bounded_runs` then leaves the step free).  One
+    with many kinks enters through its interpolant, except over its long straight stretches
+    (:meth:`phs.signals.Sampled.lines`: the holds and ramps between the sines of a recording), whose ends
+    are breakpoints and over which it is the line again.
 
     Returns ``(segs, slots)``: ``segs`` a list of ``(a, b, choice)`` with ``choice[j]`` the index of
-    input ``j``'s template in ``slots[j]`` and its constants (None for a sampled input), ``slots[j]``
-    the templates of input ``j`` as ``(key, template, n_constants)``.
+    input ``j``'s template in ``slots[j]`` and its constants (None where a sampled input enters through
+    its interpolant), ``slots[j]`` the templates of input ``j`` as ``(key, template, n_constants)``.
 
     Examples
     --------
@@ -189,11 +194,12 @@ def plan_segments(sigs, t):
     """
     t0, t1 = float(t[0]), float(t[-1])
     bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)}
-                 | {float(b) for s in sigs if isinstance(s, Sampled) and baked(s) is None for b in s.kinks()})
+                 | {float(b) for s in sigs if isinstance(s, Sampled) and baked(s) is None for b in s.kinks()}
+                 | {float(b) for s in sigs if isinstance(s, Sampled) for b in s.lines().reshape(-1)})
     edges = [t0] + [b for b in bps if t0 < b < t1] + [t1]
     slots: list[list] = [[] for _ in sigs]  # per input: list of (key, template, n_constants)
     for j, s in enumerate(sigs):
-        if isinstance(s, Sampled) and baked(s) is None:
+        if isinstance(s, Sampled) and (baked(s) is None or len(s.lines())):
             slots[j].append(LINEAR_SLOT)
     segs = []
     for a, b in zip(edges[:-1], edges[1:]):
@@ -202,7 +208,7 @@ def plan_segments(sigs, t):
         choice = []
         for j, s in enumerate(sigs):
             if isinstance(s, Sampled):
-                if baked(s) is None:  # linear between its kinks: u(a) + slope (t - a), numerically
+                if baked(s) is None or _on_line(s.lines(), 0.5 * (a + b)):  # u(a) + slope (t - a), numerically
                     ua, ub = float(s(a)), float(s(b))
                     slope = (ub - ua) / (b - a)
                     choice.append((0, [ua - slope * a, slope]))
@@ -217,6 +223,24 @@ def plan_segments(sigs, t):
             choice.append((keys.index(key), vals))
         segs.append((a, b, choice))
     return segs, slots
+
+
+def run_sampled(sampled, choice) -> list:
+    """The baked samples ``sampled`` (one entry per input, :func:`baked`) that a segment's ``choice`` uses:
+    None for an input that enters the segment as a template (a line over one of its straight stretches too).
+
+    Examples
+    --------
+    >>> run_sampled([("grid", "values"), ("grid", "values")], [None, (0, [1.0, 0.0])])
+    [('grid', 'values'), None]
+    """
+    return [g if c is None else None for g, c in zip(sampled, choice, strict=True)]
+
+
+def _on_line(lines: np.ndarray, tm: float) -> bool:
+    """Whether the time ``tm`` lies on one of the straight stretches ``lines`` (``(k, 2)``, sorted)."""
+    i = int(np.searchsorted(lines[:, 0], tm, side="right")) - 1
+    return i >= 0 and tm <= lines[i, 1]
 
 
 def segment_inputs(sigs, slots, choice, times, cache: dict) -> np.ndarray:

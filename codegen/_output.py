@@ -82,7 +82,11 @@ def output_runs(t, sigs, segs, inputs, U):
         pts = [a] + t[lo:hi].tolist() + [b]
         idx = np.array(list(range(lo, hi)) + [ib if ib is not None else -1], dtype=int)
         pos = 0
-        for ra, rh, rn, ms in bounded_runs(equal_runs(pts), sigs):
+        # the sampled inputs entering through their interpolant here, and whether a neighbouring segment
+        # has one of them as a straight stretch (a kink at the edge: the window there keeps one interval)
+        interp = [j for j, c in enumerate(choice) if c is None]
+        edges = tuple(0 <= i < len(segs) and any(segs[i][2][j] is not None for j in interp) for i in (k - 1, k + 1))
+        for ra, rh, rn, ms in bounded_runs(equal_runs(pts), [sigs[j] for j in interp], edges):
             times = ra + rh * np.arange(1, rn + 1)
             uu = inputs(choice, times)
             j = idx[pos:pos + rn]

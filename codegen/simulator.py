@@ -36,8 +36,8 @@ import numpy as np
 import sympy as sp
 
 from codegen._domain import DomainCheck, fmt_state
-from codegen._grid import step_windows, time_grid
-from codegen._inputs import baked, initial_state, input_signals, plan_segments, segment_inputs
+from codegen._grid import sampled_pieces, step_windows, time_grid
+from codegen._inputs import baked, initial_state, input_signals, plan_segments, run_sampled, segment_inputs
 from codegen._output import call_into_numpy, energy_accounts, energy_columns, output_runs
 from codegen.discrete_gradient import discrete_gradient_simulate
 from codegen.functions import _model_hash, generate
@@ -46,7 +46,7 @@ from codegen.translate import Translator
 from phs.errors import InputDataError, SimulationError
 from phs.params import TIME
 
-__all__ = ["simulate", "simulator", "Simulator", "step_windows"]
+__all__ = ["simulate", "simulator", "Simulator", "sampled_pieces", "step_windows"]
 
 
 def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: float | None = None,
@@ -297,7 +297,7 @@ class Simulator:
         qacc = np.zeros(nq)
         nrun = 0
         for r in output_runs(t, sigs, segs, lambda choice, times: self._eval_inputs(sigs, slots, choice, times), U):
-            F, layout = self._integrator(r.n, slots, sampled, r.max_step)
+            F, layout = self._integrator(r.n, slots, run_sampled(sampled, r.choice), r.max_step)
             P = self._pvec(p, r.start, r.step, layout, r.choice)
             try:
                 zs, qs = call_into_numpy(F, z, P, len(x), r.n, nq)
@@ -305,7 +305,8 @@ class Simulator:
                 try:  # once more from the state with its vanishing components set to zero
                     zs, qs = call_into_numpy(F, np.where(np.abs(z) < NEGLIGIBLE, 0.0, z), P, len(x), r.n, nq)
                 except RuntimeError:
-                    self._localize_failure(F, z, p, r.start, r.step, r.n, slots, sampled, layout, r.choice, exc, sigs)
+                    self._localize_failure(F, z, p, r.start, r.step, r.n, slots, run_sampled(sampled, r.choice), layout, r.choice,
+                                           exc, sigs)
             xs = zs * self.scale
             if not np.all(np.isfinite(xs)):
                 k = int(np.argmin(np.all(np.isfinite(xs), axis=1)))

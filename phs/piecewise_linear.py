@@ -19,8 +19,9 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import InputDataError
+from phs.kinks import linear_kinks  # noqa: F401 - linear_kinks is used and re-exported here
 from phs.params import TIME
-from phs.signals import Sampled, Signal, linear_kinks  # noqa: F401 - linear_kinks is used and re-exported here
+from phs.signals import Sampled, Signal
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import InputDataError
+from phs.kinks import KINK_SHARE, LINE_RUN, linear_kinks, straight_stretches  # noqa: F401 - re-exported
 from phs.params import TIME
 from phs.safe_parse import Arithmetic, Refusal, evaluate
 
@@ -360,42 +361,6 @@ def exponential_chirp(amplitude: float, f0: float, f1: float, duration: float, o
     return Expression(sp.Float(offset) + sp.Float(amplitude) * sp.sin(phase))
 
 
-def linear_kinks(values, times=None) -> list[int]:
-    """Sample indices where sampled values change slope: the kinks of their linear interpolant (a change
-    of slope times the shorter neighbouring interval above 1e-12 of the largest magnitude, i.e. rounding).
-
-    ``values`` is (n,) or (n, k) (a kink of any column counts); ``times`` (n,) the sample times
-    (default: uniformly spaced).
-
-    Examples
-    --------
-    >>> linear_kinks([0.0, 0.0, 1.0, 2.0, 2.0])
-    [1, 3]
-    >>> linear_kinks([0.0, 1.0, 2.0], times=[0.0, 1.0, 3.0])   # the slope halves at the middle sample
-    [1]
-    """
-    U = np.asarray(values, dtype=float)
-    U = U.reshape(len(U), -1)
-    if U.size == 0 or len(U) < 3:
-        return []
-    tol = 1e-12 * max(float(np.max(np.abs(U))), 1e-300)
-    if times is None:
-        d2 = np.abs(U[2:] - 2 * U[1:-1] + U[:-2])
-    else:
-        h = np.diff(np.asarray(times, dtype=float))[:, None]
-        slope = np.diff(U, axis=0) / h
-        d2 = np.abs(np.diff(slope, axis=0)) * np.minimum(h[1:], h[:-1])
-    return sorted({int(k) + 1 for k in np.nonzero(np.any(d2 > tol, axis=1))[0]})
-
-
-KINK_SHARE = 0.1
-"""A sampled input counts as piecewise linear when its kinks are at most this share of its intervals (or 20):
-the simulator and identification then restart at each kink.  The concealed cases' drive delayed by a
-fraction of a sample has kinks at 7 % of its samples; through the step windows instead, the electrostatic
-actuator's current at rtol 1e-7 is off by 61 % of its spread at a step (4.5 % with the restarts; the two
-rules agree to 0.06 % at rtol 1e-11), in 0.40 s per 20 s run against 0.50 s."""
-
-
 @dataclass(frozen=True)
 class Sampled(Signal):
     """Samples on a time grid, linearly interpolated (``hold="linear"``) or held (``"zoh"``).
@@ -436,7 +401,7 @@ class Sampled(Signal):
 
     def kinks(self) -> np.ndarray | None:
         """The times of the linear interpolant's kinks (:func:`linear_kinks`) when it is piecewise linear
-        with few of them (at most :data:`KINK_SHARE` of the intervals, or 20): a step, staircase, square
+        with few of them (at most :data:`~phs.kinks.KINK_SHARE` of the intervals, or 20): a step, staircase, square
         wave or ramp table as sampled.  None for many kinks (a sine, noise) and for held samples.
         Computed once.
 
@@ -452,6 +417,28 @@ class Sampled(Signal):
             few = k is not None and len(k) <= max(20, KINK_SHARE * (len(self._v) - 1))
             object.__setattr__(self, "_kinks", self._t[k] if few else None)
         return self.__dict__["_kinks"]
+
+    def lines(self) -> np.ndarray:
+        """``(k, 2)`` start and end times of the stretches of at least :data:`~phs.kinks.LINE_RUN` intervals over which
+        the linear interpolant of samples with many kinks (:meth:`kinks` is None) is one straight line: the
+        holds and ramps of a recording that also holds a sine or a chirp.  Empty for samples with few kinks
+        (they are lines between their kinks everywhere), for held samples and when no stretch is that long.
+        Computed once.
+
+        Examples
+        --------
+        >>> t = np.arange(200) * 1e-3
+        >>> v = np.where(t < 0.1, 0.0, np.sin(300 * t))     # a hold, then a sine
+        >>> Sampled(tuple(t), tuple(v)).lines().tolist()
+        [[0.0, 0.099]]
+        """
+        if "_lines" not in self.__dict__:
+            out = np.zeros((0, 2))
+            if self.hold == "linear" and self.kinks() is None:
+                ab = straight_stretches(linear_kinks(self._v, self._t), len(self._v))
+                out = self._t[np.array(ab, dtype=int).reshape(-1, 2)]
+            object.__setattr__(self, "_lines", out)
+        return self.__dict__["_lines"]
 
     def __call__(self, tt):
         tt = np.asarray(tt, dtype=float)

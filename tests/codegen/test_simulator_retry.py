@@ -33,6 +33,7 @@ def _as_smooth_samples(monkeypatch):
     # the square wave's kinks are not breakpoints: the run that failed (the step windows' path of inputs
     # with many kinks)
     monkeypatch.setattr(Sampled, "kinks", lambda self: None)
+    monkeypatch.setattr(Sampled, "lines", lambda self: np.zeros((0, 2)))  # nor its holds straight stretches
 
 
 def test_a_failed_run_passes_from_its_vanishing_state_set_to_zero():

@@ -28,12 +28,26 @@ def test_windows_follow_the_input():
     u = np.sin(2 * np.pi * 2 * t)
     u[1300:] = 0.3  # a jump in the sixth window (points 1200..1400), then constant
     w = simmod.step_windows(u)
-    assert [a for a, _, _ in w] == list(range(0, 2000, 200))
-    assert w[-1][1] == 2000
-    bounds = [m for _, _, m in w]
-    assert bounds[5:8] == [1, 1, 1]  # the window with the jump and its neighbours keep one interval
-    assert min(bounds[:5]) >= 8  # a 2 Hz sine at 1 kHz: near-linear over >= 8 samples
-    assert bounds[8:] == [64, 64]  # constant
+    assert w[0][0] == 0 and w[-1][1] == 2000
+    assert all(b == a2 for (_, b, _), (a2, _, _) in zip(w[:-1], w[1:]))  # contiguous
+    assert all(0 < b - a <= 200 for a, b, _ in w)
+    fine = simmod.FINE_WINDOW
+    near = [m for a, b, m in w if b > 1300 - fine and a < 1300 + fine]
+    assert near and set(near) == {1}  # the jump and the intervals next to it keep one interval
+    one = [(a, b) for a, b, m in w if m == 1]
+    assert all(1200 - fine <= a and b <= 1400 + fine for a, b in one)  # and nothing far from it
+    assert sum(b - a for a, b in one) <= 4 * fine  # (the whole window and both neighbours: 600 intervals)
+    assert min(m for a, b, m in w if b <= 1200 - fine) >= 8  # a 2 Hz sine at 1 kHz: near-linear over >= 8 samples
+    assert {m for a, b, m in w if a >= 1400} == {64}  # constant
+
+
+def test_rough_ends_keep_one_interval_next_to_them():
+    u = np.sin(2 * np.pi * np.linspace(0.0, 1.0, 1001))
+    fine = simmod.FINE_WINDOW
+    assert simmod.step_windows(u)[0][2] > 1
+    w = simmod.step_windows(u, rough_ends=(True, True))
+    assert w[0] == (0, fine, 1) and w[-1] == (1000 - fine, 1000, 1)
+    assert all(m > 1 for _, _, m in w[1:-1])
 
 
 def test_noise_and_zero_order_hold_keep_one_interval():
@@ -81,15 +95,18 @@ def test_smooth_samples_follow_the_signal(one_interval):
 
 
 def test_rough_windows_stay_linear(one_interval):
-    """A pulse inside a smooth input: its windows (and their neighbours) keep the linear interpolant, so
-    the run agrees with the one-interval run to the integration tolerance (1e-6 of the peak at rtol
-    1e-9, where spline and linear differ by ~1e-6 elsewhere)."""
+    """A pulse inside a smooth input: the intervals at its edges (and next to them) keep the linear
+    interpolant, so the run agrees with the one-interval run to the integration tolerance (1e-6 of the
+    peak at rtol 1e-9, where spline and linear differ by ~1e-6 elsewhere): a spline across an edge, or
+    ringing from one, would be off by the pulse's height over a sample."""
     s = mass_spring_damper(m=1.0, k=40.0, b=0.5)
     t = np.linspace(0.0, 6.0, 6001)
     F = 0.05 * np.sin(2 * np.pi * 0.3 * t)
     F[3000:3500] += 0.5
     w = simmod.step_windows(F)
-    assert all(m == 1 for a, b, m in w if b >= 2800 and a <= 3700)
+    fine = simmod.FINE_WINDOW
+    assert all(m == 1 for a, b, m in w if any(b > e - fine and a < e + fine for e in (3000, 3500)))
+    assert any(m > 1 for a, b, m in w if 3000 < a and b < 3500)  # the smooth top of the pulse steps freely
     windowed = simulate(s, t, u={"F": F}, rtol=1e-9)["position"]
     one_interval()
     linear = simulate(s, t, u={"F": F}, rtol=1e-9)["position"]

@@ -17,8 +17,8 @@ import numpy as np
 
 from codegen._inputs import LINEAR_SLOT
 from codegen.functions import _model_hash, generate
-from codegen.simulator import Simulator, step_windows
-from phs.signals import KINK_SHARE, linear_kinks
+from codegen.simulator import Simulator, sampled_pieces
+from phs.kinks import KINK_SHARE, linear_kinks
 from phs.workflows.identify.c_library import _Library
 
 # compile by default when the fit is large: samples x (1 + directions) x the dynamics' size above this
@@ -94,12 +94,13 @@ class _Problem:
         # as sampled) is integrated piece by piece with restarts at its kinks, so CVODES takes long
         # steps in between; otherwise it is interpolated and the step bounded by the sample interval
         # (in windows whose step bound follows the input's smoothness: see ``step_windows``)
+        # (and over the long straight stretches of inputs with many kinks: holds and ramps between sines)
         kinks = linear_kinks(U)
         piecewise = nu > 0 and len(kinks) <= max(20, KINK_SHARE * (N - 1))  # the simulator's rule (Sampled.kinks)
-        windows = step_windows(U) if nu > 0 and not piecewise else []
-        cuts = sorted(set(self.ms_edges) | (set(kinks) if piecewise else {w[0] for w in windows}))
-        bound = np.ones(N)  # the step bound of the window each sample interval belongs to
-        for w0, w1, m in windows:
+        pieces = sampled_pieces(U, kinks, piecewise) if nu > 0 else [(0, N - 1, 1)]
+        cuts = sorted(set(self.ms_edges) | {pc[0] for pc in pieces})
+        bound = np.ones(N)  # per sample interval: 0 on a line, else the step bound of its window
+        for w0, w1, m in pieces:
             bound[w0:w1] = m
         gen = generate(system)
         scale = np.array([st.typical for st in system.states], dtype=float)  # the simulator's scaling
@@ -147,13 +148,13 @@ class _Problem:
             sens = Simulator(system, rtol=rtol, atol=atol, energy=False, compile=self.compiled, compiler=compiler,
                              integrator_options={**opts, "nfwd": nd})
             self.scale = sim.scale
-            slots = [[LINEAR_SLOT] for _ in range(nu)] if piecewise else [[] for _ in range(nu)]
+            slots = [[LINEAR_SLOT] for _ in range(nu)]
             dt = t[1] - t[0]
             # segments: (first sample, last sample, integrator, sensitivity integrator, the integrator
             # parameters after p)
             self.segments = []
             for i0, i1 in zip(cuts[:-1], cuts[1:]):
-                if piecewise:
+                if nu and bound[i0] == 0:  # a line from sample i0 to i1
                     F, _layout = sim._integrator(i1 - i0, slots, [None] * nu)
                     Fs, _layout = sens._integrator(i1 - i0, slots, [None] * nu)
                     coef = []
