@@ -18,6 +18,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import sympy as sp
@@ -196,7 +197,11 @@ class Hysteresis(_AtMomentum):
 
 class AddedMass(_AtMomentum):
     """Extra inertia moving with the body (entrained fluid, unmodelled parts): ``H(p) → H(p/√(1+μ))``,
-    i.e. every kinetic term of ``p`` sees the mass times ``1 + μ``."""
+    i.e. every kinetic term of ``p`` sees the mass times ``1 + μ``, and the body's velocity is
+    ``p / (m (1 + μ))`` wherever the model reads it from ``p``: in the dissipation (a friction, drag or
+    hysteresis attached before reads the new velocity, as one attached after does) and in the measured
+    outputs (a velocity sensor).  Next to a free mass only ``m (1 + μ)`` is then determined, whatever was
+    attached before."""
 
     effect = "added_mass"
     summary = "more inertia than modelled (added/entrained mass)"
@@ -209,7 +214,14 @@ class AddedMass(_AtMomentum):
         p = system.states[system.state_names.index(member)].symbol
         sub = {p: p / sp.sqrt(1 + params[0].symbol)}
         H = [EnergyTerm(t.label, t.expr.subs(sub)) for t in system.energy_terms]
-        return _rebuild(system, H=H, params=params if declare else [], effect=self.effect), {}
+        # elsewhere p enters through the velocity p/m, now p/(m (1 + mu)); the structure J keeps p (a
+        # gyroscopic term is a momentum, not a velocity)
+        vel = {p: p / (1 + params[0].symbol)}
+        R = sp.Matrix(system.R).xreplace(vel)
+        dissipators = [(label, {k: sp.sympify(v).xreplace(vel) for k, v in entries.items()}) for label, entries in system.dissipators]
+        measured = [dataclasses.replace(m, expr=sp.sympify(m.expr).xreplace(vel)) for m in system.measured]
+        return _rebuild(system, H=H, R=R, dissipators=dissipators, measured=measured, params=params if declare else [],
+                        effect=self.effect), {}
 
 
 class CubicStiffness(_AtStates):

@@ -128,6 +128,26 @@ def test_added_mass_slows_the_oscillation_by_sqrt_one_plus_mu():
     assert w == pytest.approx(w0 / 2.0, rel=1e-6)  # mass x 4 -> frequency / 2
 
 
+@pytest.mark.parametrize("before", [CoulombFriction, Hysteresis])
+def test_added_mass_after_a_velocity_element_is_a_heavier_body(before):
+    """An added mass attached after a friction or a hysteresis (as a diagnosis's second round attaches it)
+    gives the dynamics of the body with mass m (1 + mu) and that element: the element reads the body's new
+    velocity.  (Reading p / m instead made mu a second knob on the friction's smoothing, which a second
+    round took for an added mass.)"""
+    s = mass_spring_damper(m=0.5)
+    first = before().augment(s, "m.p", Scales.of(s)).system
+    mu = 0.6
+    both = AddedMass().augment(first, "m.p", Scales.of(first)).system.with_params({"added_mass.mu": mu})
+    heavier = first.with_params({"m.m": 0.5 * (1 + mu)})
+    f_both, f_heavier = generate(both), generate(heavier)
+    rng = np.random.default_rng(0)
+    for _ in range(20):  # the right-hand sides agree at any state (the same momentum p)
+        x = rng.normal(size=len(both.states)) * np.array([0.3] + [0.05] * (len(both.states) - 1))
+        a = np.asarray(f_both.rhs(x, [0.7], both.param_vector()), float).reshape(-1)
+        b = np.asarray(f_heavier.rhs(x, [0.7], heavier.param_vector()), float).reshape(-1)
+        assert a == pytest.approx(b, rel=1e-12, abs=1e-12)
+
+
 def test_charge_retention_matches_the_drift_branch_model():
     """The congruence insertion equals building the RC branch with components (DriftBranch)."""
     from components import Capacitor, DriftBranch, Resistor, VoltageSource
