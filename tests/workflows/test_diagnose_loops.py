@@ -20,6 +20,7 @@ import pytest
 
 from examples.concealed_loops import CASES, NOMINAL_FREE, generate, nominal
 from phs.workflows.diagnose import diagnose
+from phs.workflows.diagnose.hypotheses import REFIT_FTOL
 
 SECONDS = 3.0
 SAME = 1e-4
@@ -36,6 +37,7 @@ def _check(d, info):
     assert not d.verdict["failed"], d.summary()
     for h in d.hypotheses:
         assert h.ok and h.rss <= d.nominal.rss * (1 + SAME), (h.label, h.rss, d.nominal.rss)
+    assert all(a.ftol == REFIT_FTOL for a in d.accepted)  # what is reported is a tight fit (a chosen rival polished)
     # the fix is worth it on the channel that carries the friction: the controller force
     assert d.final.validation_fit_percent["u_c"] - d.nominal.validation_fit_percent["u_c"] > 5.0, d.summary()
     assert d.structure_checks()["ok"]

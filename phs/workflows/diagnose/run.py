@@ -14,7 +14,7 @@ from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick
 from phs.workflows.diagnose.result import Diagnosis, _verdict
-from phs.workflows.diagnose.screening import _refit_deferred, _refit_friction_rival, _screen_and_refit
+from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _screen_and_refit
 
 SPLIT = 0.7
 """Share of a single recording used for training when no validation recording is given."""
@@ -175,6 +175,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                 pick = _pick(current, hyps, data_r)
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
+            pick = _polished(current, pick, data_r, progress, f"round {round_ + 1}")  # a rival's looser refit, finished
             hyps.insert(0, pick)
         if pick is None:
             break
