@@ -38,9 +38,9 @@ def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True, ordered=F
 
 
 def _polished(current, h, data, progress=False, label=""):
-    """``h`` refitted on to ``REFIT_FTOL`` when its refit stopped looser (a rival of the best screened
-    hypothesis, :data:`~phs.workflows.diagnose.hypotheses.RIVAL_FTOL`, that was chosen), from where it
-    stopped; ``h`` itself when it needs no polish or when the polish fails, and ``h`` marked tight when the
+    """``h`` refitted on to ``REFIT_FTOL`` when its refit stopped looser (a hypothesis screened below the
+    :data:`TIGHT_REFITS` best, refitted to :data:`~phs.workflows.diagnose.hypotheses.RIVAL_FTOL`, that was
+    chosen), from where it stopped; ``h`` itself when it needs no polish or when the polish fails, and ``h`` marked tight when the
     polish ends no lower on the training data (it was converged already)."""
     from phs.workflows.diagnose.hypotheses import REFIT_FTOL
 
