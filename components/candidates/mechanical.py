@@ -218,10 +218,15 @@ class AddedMass(_AtMomentum):
         # gyroscopic term is a momentum, not a velocity)
         vel = {p: p / (1 + params[0].symbol)}
         R = sp.Matrix(system.R).xreplace(vel)
-        dissipators = [(label, {k: sp.sympify(v).xreplace(vel) for k, v in entries.items()}) for label, entries in system.dissipators]
-        measured = [dataclasses.replace(m, expr=sp.sympify(m.expr).xreplace(vel)) for m in system.measured]
+        dissipators = [(label, {k: _at(v, vel) for k, v in entries.items()}) for label, entries in system.dissipators]
+        measured = [dataclasses.replace(m, expr=_at(m.expr, vel)) for m in system.measured]
         return _rebuild(system, H=H, R=R, dissipators=dissipators, measured=measured, params=params if declare else [],
                         effect=self.effect), {}
+
+
+def _at(expr, sub: dict):
+    """``expr`` (a model's expression, or a plain number) with ``sub`` replaced in it."""
+    return expr.xreplace(sub) if isinstance(expr, sp.Basic) else expr
 
 
 class CubicStiffness(_AtStates):
