@@ -4,7 +4,9 @@ A plant recorded under feedback is modelled as plant + known controller: the con
 component joined to the plant's moving body by the usual junction (``series("m", "ctrl")``:
 it shares the body's velocity ``v`` and adds its force), its input is the recorded reference,
 and the force it computes is a measured output, so a recorded controller output can be fitted
-as one more channel.
+as one more channel.  That output is marked a computed command (``Measured.command``): diagnosis
+tries drive elements (a delay, a saturation) between it and the plant
+(:mod:`components.candidates.elements`).
 
 Position loop (PD)
 ------------------
@@ -153,7 +155,7 @@ class PositionLoop(Component):
             diss = Dissipator(self.name, (), kd * port.flow**2 - a * s * port.flow + s**2 / (tau * kf))
             # K_p (r_f - x) + K_d (r_f' - v), with K_d v = tau y - k_f r_f
             force = kp * (rf - x) + kd * (r - rf) / tau - (tau * y - kf * rf)
-        meas = Measured(self.effort, force, "N", f"force computed by the position controller {self.name}")
+        meas = Measured(self.effort, force, "N", f"force computed by the position controller {self.name}", command=True)
         return Piece(self.name, storages=tuple(storages), energy=tuple(energy), ports=(port,), internal=tuple(internal),
                      relations=tuple(rels), sources=(Source(info, ref),), dissipators=(diss,), params=params,
                      measured=(meas,))
@@ -197,7 +199,8 @@ class VelocityLoop(Component):
         rels = (Relation(port.effort - kv * (port.flow - ref.flow), self.name, "controller"),
                 Relation(ref.effort + port.effort, self.name, "controller"))
         slip = port.flow - ref.flow
-        meas = Measured(self.effort, symbol_of_output(info.output), "N", f"force computed by the velocity controller {self.name}")
+        meas = Measured(self.effort, symbol_of_output(info.output), "N", f"force computed by the velocity controller {self.name}",
+                        command=True)
         return Piece(self.name, ports=(port,), internal=(ref,), relations=rels, sources=(Source(info, ref),),
                      dissipators=(Dissipator(self.name, (), kv * slip**2),), params=decl, measured=(meas,))
 

@@ -19,6 +19,17 @@ Cases (:data:`CASES`; each names the effects the diagnosis should find, ``info["
     several-fold to absorb it (``info["absorbed"]``: the nominal damping the refit reaches).
 ``two_effects``
     friction and a hardening spring ``K₃ x³`` at once.
+``loop_delay``
+    no friction; the force reaches the plant :data:`LOOP_DELAY` after the controller computed it (a
+    digital loop's computation and transport delay): ``F(t) = F_c(t − τ)``, the recorded ``u_c`` being
+    the command ``F_c``.  Position with 1 % noise, command with 2 %.
+``drive_saturation``
+    no friction; the drive delivers at most :data:`DRIVE_LIMIT`: ``F = clip(F_c, −F_max, F_max)``
+    (the command's transients after each step of the reference exceed it); the recorded ``u_c`` is the
+    command before the limit.
+
+The last two are not port-Hamiltonian (a delay or a clip inside the loop): their truth is integrated
+by :func:`simulate_loop` (classical Runge-Kutta, ten steps per sample, the command held over each).
 
 :func:`generate` returns a :class:`phs.workflows.recording.Recording` and what the truth was.
 Training references: held set points every 0.5 s plus a slow sine; validation: other set points
@@ -39,15 +50,20 @@ M, K, B = 0.5, 40.0, 1.0          # plant: mass [kg], spring [N/m], viscous damp
 KP, KD, TAU = 400.0, 6.0, 0.01    # controller gains and reference filter (known)
 DT = 1e-3
 NOMINAL_FREE = ("m.m", "k.K", "b.b")
-CASES = ("closed_loop", "quantised_encoder", "absorbed", "two_effects")
+CASES = ("closed_loop", "quantised_encoder", "absorbed", "two_effects", "loop_delay", "drive_saturation")
+LOOP_DELAY = 0.004                # [s] between the controller's command and the force on the plant
+DRIVE_LIMIT = 6.0                 # [N] the drive's limit (the command's step transients reach 18 to 21 N)
 _TRUTH = {  # case: viscous damping, friction force, smoothing speed, cubic stiffness [N/m^3]
     "closed_loop": (B, 0.4, 2e-3, 0.0),
     "quantised_encoder": (B, 0.4, 2e-3, 0.0),
     "absorbed": (0.1, 1.2, 2e-3, 0.0),
     "two_effects": (B, 0.4, 2e-3, 2.5e5),
+    "loop_delay": (B, 0.0, 2e-3, 0.0),
+    "drive_saturation": (B, 0.0, 2e-3, 0.0),
 }
 _EFFECTS = {"closed_loop": ["coulomb_friction"], "quantised_encoder": ["coulomb_friction"],
-            "absorbed": ["coulomb_friction"], "two_effects": ["coulomb_friction", "cubic_stiffness"]}
+            "absorbed": ["coulomb_friction"], "two_effects": ["coulomb_friction", "cubic_stiffness"],
+            "loop_delay": ["time_delay"], "drive_saturation": ["input_saturation"]}
 
 
 def plant(*, b: float = B, friction: tuple | None = None, k3: float = 0.0):
@@ -81,6 +97,51 @@ def reference(t: np.ndarray, seed: int, validation: bool = False) -> np.ndarray:
     return levels[(t / 0.5).astype(int)] + 0.005 * np.sin(2 * np.pi * (1.9 if validation else 0.7) * t)
 
 
+def simulate_loop(t: np.ndarray, r: np.ndarray, *, delay: float = 0.0, limit: float | None = None, substeps: int = 10):
+    """Position and controller command of the plant under the PD loop with a reference filter (the law of
+    :class:`components.control.PositionLoop`) when the force reaching the plant is the command delayed by
+    ``delay`` (a whole number of substeps; the first command is held before it) and clipped to
+    ``±limit``.  Classical Runge-Kutta with ``substeps`` steps per sample, the reference interpolated
+    linearly and the applied force held over each step; from rest.
+
+    Examples
+    --------
+    >>> from codegen import simulator
+    >>> t = np.arange(0.0, 1.0, DT)
+    >>> r = reference(t, seed=10)
+    >>> x, uc = simulate_loop(t, r)
+    >>> res = simulator(nominal()).run(t, u={"r": r})
+    >>> bool(np.max(np.abs(x - res["position"])) < 1e-3 * np.ptp(x)), bool(np.max(np.abs(uc - res["u_c"])) < 2e-3 * np.ptp(uc))
+    (True, True)
+    """
+    h = float(t[1] - t[0]) / substeps
+    n = (len(t) - 1) * substeps + 1
+    rr = np.interp(np.arange(n) * h, t, r)
+    lag = int(round(delay / h))
+    y = np.zeros(3)  # position, velocity, filtered reference
+    cmd, pos = np.zeros(n), np.zeros(n)
+
+    def command(y, rk):
+        return KP * (y[2] - y[0]) + KD * ((rk - y[2]) / TAU - y[1])
+
+    for k in range(n):
+        cmd[k], pos[k] = command(y, rr[k]), y[0]
+        if k == n - 1:
+            break
+        f = cmd[max(k - lag, 0)]
+        f = float(np.clip(f, -limit, limit)) if limit is not None else f
+
+        def rate(y, rk=rr[k], f=f):
+            return np.array([y[1], (f - K * y[0] - B * y[1]) / M, (rk - y[2]) / TAU])
+
+        k1 = rate(y)
+        k2 = rate(y + h / 2 * k1)
+        k3 = rate(y + h / 2 * k2)
+        k4 = rate(y + h * k3)
+        y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return pos[::substeps], cmd[::substeps]
+
+
 def generate(case: str, seconds: float = 4.0, seed: int = 1, validation: bool = False):
     """A recording of ``case`` (:data:`CASES`) and a dict of what the truth was.
 
@@ -96,15 +157,21 @@ def generate(case: str, seconds: float = 4.0, seed: int = 1, validation: bool = 
     if case not in CASES:
         raise InputDataError(f"concealed loops: unknown case {case!r}; known: {', '.join(CASES)}")
     b, fc, vs, k3 = _TRUTH[case]
-    truth = plant(b=b, friction=(fc, vs), k3=k3)
-    from codegen import simulator
-
     t = np.arange(0.0, seconds, DT)
     r = reference(t, seed=10 * seed + (5 if validation else 0), validation=validation)
-    res = simulator(truth).run(t, u={"r": r})
-    pos, uc = np.asarray(res["position"]), np.asarray(res["u_c"])
-    rng = np.random.default_rng(1000 * seed + (7 if validation else 3))
     info = {"case": case, "effects": list(_EFFECTS[case]), "b": b, "F_c": fc, "v_s": vs, "K3": k3}
+    if case == "loop_delay":
+        pos, uc = simulate_loop(t, r, delay=LOOP_DELAY)
+        info["tau_d"] = LOOP_DELAY
+    elif case == "drive_saturation":
+        pos, uc = simulate_loop(t, r, limit=DRIVE_LIMIT)
+        info["F_max"] = DRIVE_LIMIT
+    else:
+        from codegen import simulator
+
+        res = simulator(plant(b=b, friction=(fc, vs), k3=k3)).run(t, u={"r": r})
+        pos, uc = np.asarray(res["position"]), np.asarray(res["u_c"])
+    rng = np.random.default_rng(1000 * seed + (7 if validation else 3))
     if case == "quantised_encoder":
         count = 0.08 / 2**20  # 2^-20 of an 80 mm travel per count
         pos_m = np.round(pos / count) * count

@@ -19,6 +19,7 @@ is the sum of the resistors' dissipation forms and is positive semidefinite.
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import replace
 
 import sympy as sp
 from sympy.core.exprtools import factor_terms
@@ -317,7 +318,7 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
     for mo in [mo for pc in pieces for mo in pc.measured] + measured:
         if isinstance(mo, tuple):
             mo = Measured(mo[0], sp.sympify(mo[1]))
-        meas.append(Measured(mo.name, subst(sp.sympify(mo.expr)), mo.unit, mo.description))
+        meas.append(replace(mo, expr=subst(sp.sympify(mo.expr))))
     conds = [Condition(c.label, subst(c.expr), c.description) for pc in pieces for c in pc.conditions]
     conds += [Condition(c.label, subst(c.expr), c.description) for c in conditions]
 

@@ -85,7 +85,8 @@ def system_to_dict(system) -> dict[str, Any]:
         "energy": [{"label": e.label, "expr": sp.srepr(e.expr)} for e in s.energy_terms],
         "matrices": {k: srepr_matrix(getattr(s, k)) for k in _MATRICES},
         "measured": [
-            {"name": m.name, "expr": sp.srepr(sp.sympify(m.expr)), "unit": m.unit, "description": m.description}
+            {"name": m.name, "expr": sp.srepr(sp.sympify(m.expr)), "unit": m.unit, "description": m.description,
+             **({"command": True} if m.command else {})}
             for m in s.measured
         ],
         "conditions": [
@@ -340,7 +341,7 @@ def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
             w = f"measured[{i}]"
             name = r.get(m, "name", w, str)
             measured.append(Measured(name, r.expr(r.get(m, "expr", w), f"{w}.expr (measured {name!r})"), r.unit(m, "unit", w),
-                                     r.get(m, "description", w, str, "")))
+                                     r.get(m, "description", w, str, ""), r.get(m, "command", w, bool, False)))
         conditions = []
         for i, c in enumerate(r.items(data, "conditions")):
             w = f"conditions[{i}]"

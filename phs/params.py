@@ -341,3 +341,6 @@ class Measured:
     expr: sp.Expr
     unit: str = "1"
     description: str = ""
+    command: bool = False
+    """A controller's computed command (its output force, recorded by its firmware), not a sensor of the
+    plant: diagnosis tries drive elements (a delay, a saturation) between this command and the plant."""

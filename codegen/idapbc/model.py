@@ -82,13 +82,15 @@ def neglect_states(system: PHSystem, patterns) -> PHSystem:
             dissipators.append((label, kept))
     sub = lambda M: M.extract(keep, keep).xreplace(zero)  # noqa: E731
     rows = lambda M: M.extract(keep, list(range(M.cols))).xreplace(zero) if M.cols else sp.zeros(len(keep), 0)  # noqa: E731
-    from phs.params import Condition, EnergyTerm, Measured
+    from dataclasses import replace
+
+    from phs.params import Condition, EnergyTerm
 
     terms = [EnergyTerm(t.label, t.expr.xreplace(zero)) for t in system.energy_terms]
     terms = [t for t in terms if t.expr != 0] or [EnergyTerm("H", sp.Integer(0))]
     conditions = [Condition(c.label, c.expr.xreplace(zero), c.description) for c in system.conditions
                   if not c.label.endswith(f"in {system.name}")]
-    measured = [Measured(m.name, sp.sympify(m.expr).xreplace(zero), m.unit, m.description) for m in system.measured]
+    measured = [replace(m, expr=sp.sympify(m.expr).xreplace(zero)) for m in system.measured]
     return PHSystem(
         f"{system.name}_design", [system.states[i] for i in keep], terms, sub(system.J), sub(system.R), rows(system.G),
         P=rows(system.P), S=system.S.xreplace(zero), N=system.N.xreplace(zero), inputs=system.inputs,

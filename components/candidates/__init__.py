@@ -19,7 +19,8 @@ Three ways an effect enters a model:
     replaced by the sum of its own and the new element's, which is what "in series" means.
 ``input``
     A transformation of an input signal before it reaches the model (saturation, slew-rate limit,
-    delay): the amplifier or the actuator's drive, outside the port-Hamiltonian part.  Such an
+    delay): the amplifier or the actuator's drive, outside the port-Hamiltonian part; in a closed
+    loop also between the controller's command and the plant.  Such an
     element has a numeric :meth:`InputElement.transform` and its parameters are fitted by a bounded
     search on the simulated output.
 ``measured``
@@ -32,9 +33,13 @@ The modules, one physical domain each (imports run downward: the effects import 
 :mod:`.library` imports the effects):
 
 :mod:`components.candidates.base`
-    The interface (:class:`Candidate`, :class:`InputElement`, :class:`Augmentation`, :class:`Scales`)
-    and the machinery every candidate shares: where it can attach, and how it changes J, R, H while
-    keeping them port-Hamiltonian.
+    The interface (:class:`Candidate`, :class:`Augmentation`, :class:`Scales`) and the machinery every
+    candidate shares: where it can attach, and how it changes J, R, H while keeping them
+    port-Hamiltonian.
+:mod:`components.candidates.elements`
+    :class:`InputElement`, the form of drive elements, on a model input or, inside a feedback loop,
+    between a controller's recorded command and the plant (:class:`InLoop`: the element's deviation
+    from the command enters as a force on the driven body).
 :mod:`components.candidates.electrical`
     Charge retention, leakage, series resistance.  :class:`Leakage` drains any conserved quantity a
     storage holds (charge, fluid volume, gas mass or amount) through a conductance across the storage,
@@ -70,7 +75,6 @@ Examples
 from components.candidates.base import (
     Augmentation,
     Candidate,
-    InputElement,
     Scales,
     add_damping,
     add_energy,
@@ -82,12 +86,14 @@ from components.candidates.base import (
 )
 from components.candidates.drive import InputSaturation, SlewRateLimit, TimeDelay
 from components.candidates.electrical import ChargeRetention, Leakage, SeriesResistance
+from components.candidates.elements import InLoop, InputElement, command_channels
 from components.candidates.library import EFFECTS, LIBRARY, lookup
 from components.candidates.mechanical import AddedMass, CoulombFriction, CubicStiffness, Hysteresis, QuadraticDrag, ViscoelasticCreep
 from components.candidates.sensor import Offset
 
 __all__ = [
-    "Scales", "Augmentation", "Candidate", "InputElement", "LIBRARY", "EFFECTS", "lookup", "momentum_states", "displacement_states",
+    "Scales", "Augmentation", "Candidate", "InputElement", "InLoop", "command_channels", "LIBRARY", "EFFECTS", "lookup",
+    "momentum_states", "displacement_states",
     "charge_states", "stored_quantity_states", "add_damping", "add_energy", "with_groups", "ChargeRetention", "Leakage", "SeriesResistance",
     "CoulombFriction", "ViscoelasticCreep",
     "CubicStiffness", "Hysteresis", "QuadraticDrag", "AddedMass", "InputSaturation", "SlewRateLimit", "TimeDelay", "Offset",

@@ -2,8 +2,8 @@
 
 * :class:`Scales`: typical magnitudes along the nominal fit, to start and bound new parameters;
 * :class:`Augmentation`: a model with one candidate attached;
-* :class:`Candidate`: the one interface of candidate physics, and :class:`InputElement`, its form for
-  drive elements (kind ``input``) that act on the recorded command outside the port-Hamiltonian part;
+* :class:`Candidate`: the one interface of candidate physics (drive elements, kind ``input``, take the
+  form of :class:`components.candidates.elements.InputElement`);
 * where candidates attach: :func:`momentum_states`, :func:`displacement_states`, :func:`charge_states`,
   :func:`stored_quantity_states`, :func:`with_groups` (repeated parts of identical segments as one point);
 * how they change a model while keeping it port-Hamiltonian: rebuilding a system with parts replaced,
@@ -118,7 +118,8 @@ class Augmentation:
 
     ``system`` is the augmented PHSystem (for ``input`` elements, the unchanged system);
     ``free`` the new parameters to fit (``bounds`` and ``log_scale`` for them);
-    ``x0`` initial values of new states; ``element`` the input element for ``input`` candidates.
+    ``x0`` initial values of new states; ``element`` the input element for ``input`` candidates
+    (:class:`components.candidates.elements.InputElement`).
     """
 
     effect: str
@@ -129,7 +130,7 @@ class Augmentation:
     bounds: dict
     log_scale: list
     x0: dict = field(default_factory=dict)
-    element: InputElement | None = None
+    element: object = None
     summary: str = ""
     """The candidate's phrase for explanations (filled in from :attr:`Candidate.summary` when empty)."""
     starts: tuple = ()
@@ -312,7 +313,7 @@ def _entries(power: sp.Expr, z) -> dict:
 
 
 def _rebuild(system, *, states=None, H=None, J=None, R=None, G=None, P=None, S=None, N=None, params=(),
-             dissipators=None, measured=None, effect: str = "") -> object:
+             dissipators=None, measured=None, inputs=None, effect: str = "") -> object:
     """A new PHSystem from ``system`` with the given parts replaced and ``params`` added."""
     from phs.system import PHSystem
 
@@ -323,7 +324,7 @@ def _rebuild(system, *, states=None, H=None, J=None, R=None, G=None, P=None, S=N
         J=J if J is not None else system.J, R=R if R is not None else system.R,
         G=G if G is not None else system.G, P=P if P is not None else system.P,
         S=S if S is not None else system.S, N=N if N is not None else system.N,
-        inputs=system.inputs, params=tuple(system.params) + tuple(params),
+        inputs=inputs if inputs is not None else system.inputs, params=tuple(system.params) + tuple(params),
         measured=measured if measured is not None else system.measured,
         conditions=[c for c in system.conditions if not c.label.endswith(f"in {system.name}")],
         dissipators=dissipators if dissipators is not None else system.dissipators,
@@ -455,90 +456,3 @@ class _AtStates(Candidate):
 
 def _state_name(effect: str, local: str, tag: str) -> str:
     return f"{effect}.{tag}.{local}" if tag else f"{effect}.{local}"
-
-
-
-# -- input elements ------------------------------------------------------------------------------------------------
-INPUT_GROUP = "+"
-"""Joins the inputs of one place of an input element (inputs driven by the same command)."""
-
-
-def input_members(where: str) -> list[str]:
-    """The inputs of an input element's place: ``"V4+V9"`` → ``["V4", "V9"]``, ``"U"`` → ``["U"]``.
-
-    Examples
-    --------
-    >>> input_members("V4+V9+V15"), input_members("U")
-    (['V4', 'V9', 'V15'], ['U'])
-    """
-    return where.split(INPUT_GROUP)
-
-
-class InputElement(Candidate):
-    """An element between the recorded input and the model's input (drive electronics, transport):
-    :meth:`transform` maps the sampled input with parameter values ``theta`` (one per entry of
-    :meth:`parameters`).  The model itself is unchanged."""
-
-    kind = "input"
-
-    def attach_points(self, system) -> list[str]:
-        return list(system.input_names)
-
-    def places(self, system, commands: dict) -> list[str]:
-        """Where the element is tried, given the recorded command of each input (``commands[name]``):
-        every attach point whose command varies (on a constant one the element changes nothing), with
-        the inputs driven by the very same command joined into one place ``a+b+c`` (an element in each
-        of their drives, with one set of parameters: several actuators of one kind driven together, as
-        :func:`with_groups` joins the parts of identical segments).
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> from components.candidates import TimeDelay
-        >>> from systems.hydrogel_arm import hydrogel_arm
-        >>> arm = hydrogel_arm(per_segment=1, svas=[4, 9, 15])
-        >>> pulse = np.array([0.0, 3.6, 3.6, 0.0])
-        >>> TimeDelay().places(arm, {"V4": pulse, "V9": pulse, "V15": pulse})
-        ['V9+V4+V15']
-        >>> TimeDelay().places(arm, {"V4": pulse, "V9": 0 * pulse, "V15": 2 * pulse})
-        ['V4', 'V15']
-        """
-        groups: list[tuple[np.ndarray, list[str]]] = []
-        for n in self.attach_points(system):
-            u = np.asarray(commands[n], float)
-            if np.ptp(u) == 0:
-                continue
-            for command, members in groups:
-                if command.shape == u.shape and np.array_equal(command, u):
-                    members.append(n)
-                    break
-            else:
-                groups.append((u, [n]))
-        return [INPUT_GROUP.join(members) for _, members in groups]
-
-    def _check_where(self, system, where: str) -> None:
-        points = self.attach_points(system)
-        bad = [n for n in input_members(where) if n not in points]
-        if bad:
-            raise ModelError(f"candidate {self.effect!r} cannot attach to {where!r} of {system.name!r}; "
-                             f"possible: {points or 'none'} (or several joined by {INPUT_GROUP!r})")
-
-    @abstractmethod
-    def parameters(self, t, u) -> list[tuple[str, float, float, float]]:
-        """``(name, start, lo, hi)`` per parameter, given the recorded input."""
-
-    @abstractmethod
-    def transform(self, t: np.ndarray, u: np.ndarray, theta) -> np.ndarray:
-        """The input the model receives."""
-
-    def neutral(self, t, u) -> list | None:
-        """Parameter values (one per entry of :meth:`parameters`) at which :meth:`transform` passes the
-        input through unchanged, or None when unknown."""
-        return None
-
-    def augment(self, system, where, scales) -> Augmentation:
-        self._check_where(system, where)
-        return Augmentation(self.effect, where, self.component, system, [], {}, [], {}, self)
-
-    component = ""
-

@@ -2,7 +2,7 @@
 
 The amplifier or the actuator's drive may saturate (:class:`InputSaturation`), limit the rate of
 change (:class:`SlewRateLimit`) or delay the command (:class:`TimeDelay`).  These act on the input
-signal outside the port-Hamiltonian part (:class:`~components.candidates.base.InputElement`): the
+signal outside the port-Hamiltonian part (:class:`~components.candidates.elements.InputElement`): the
 model is unchanged and each element's :meth:`transform` maps the sampled command to what the model
 receives; diagnosis fits their parameters by a bounded search on the simulated output.
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from components.candidates.base import InputElement
+from components.candidates.elements import InputElement
 
 
 class TimeDelay(InputElement):

@@ -35,12 +35,13 @@ Examples
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import sympy as sp
 
 from components.candidates.base import _add_states, _rebuild
-from phs.params import EnergyTerm, Measured, Param, StateInfo
+from phs.params import EnergyTerm, Param, StateInfo
 
 if TYPE_CHECKING:
     from phs.system import PHSystem
@@ -93,7 +94,7 @@ def correct_measured(system, output: str, correction: sp.Expr, params, effect: s
     k = system.measured_names.index(output)
     measured = list(system.measured)
     mo = measured[k]
-    measured[k] = Measured(mo.name, mo.expr + correction, mo.unit, mo.description)
+    measured[k] = replace(mo, expr=mo.expr + correction)
     return _rebuild(system, measured=measured, params=params, effect=effect)
 
 

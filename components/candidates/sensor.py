@@ -15,8 +15,9 @@ Examples
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from components.candidates.base import Augmentation, Candidate, _rebuild, _zero
-from phs.params import Measured
 
 
 class Offset(Candidate):
@@ -36,7 +37,7 @@ class Offset(Candidate):
         ref = max(scales.get("value", where, 1.0), 1e-12)
         c = self.param(f"{where}", 0.01 * ref, mo.unit, f"offset of the measured output {where}", (-100 * ref, 100 * ref))
         measured = list(system.measured)
-        measured[k] = Measured(mo.name, mo.expr + c.symbol, mo.unit, mo.description)
+        measured[k] = replace(mo, expr=mo.expr + c.symbol)
         s = _rebuild(system, measured=measured, params=[c], effect=self.effect)
         return Augmentation(self.effect, where, "constant added to the reading", s, [c.name], {c.name: c.range}, [],
                             neutral={c.name: _zero(c)})

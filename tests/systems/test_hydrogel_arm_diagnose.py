@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from components.candidates import LIBRARY, Scales, TimeDelay
-from phs.workflows.diagnose.hypotheses import _element_search, _simulate, _transformed
+from phs.workflows.diagnose.element_search import element_search
+from phs.workflows.diagnose.hypotheses import _simulate, _transformed
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 EXAMPLE = os.path.join(ROOT, "docs", "examples", "diagnose_hydrogel_arm.py")
@@ -55,7 +56,7 @@ def test_delay_candidate_on_the_arms_drives_reproduces_the_concealed_recording()
         return float(np.sum((s["tip"] - clean["tip"]) ** 2))
 
     specs = TimeDelay().parameters(clean.t, clean["V4"])
-    found = _element_search(cost, specs, [specs[0][1]])[0]
+    found = element_search(cost, specs, [specs[0][1]])[0]
     # noise-free and with the model at the truth the cost is zero at 2 s only; the bounded refinement (at most
     # 8 steps in the bracket of grid points around 2 s: 0.6 to 3.37 s or 1.42 to 8 s) lands within 0.01 s
     assert math.isclose(found, ex.DELAY, abs_tol=0.01)

@@ -1,4 +1,4 @@
-"""The bounded search of an input element's parameters (``_element_search``): the whole grid, and the local
+"""The bounded search of an input element's parameters (``element_search``): the whole grid, and the local
 search of a joint fit's later rounds, which falls back to the whole grid when its bracket does not hold the
 minimum.  Costs with a known minimum, counted evaluations."""
 
@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from phs.workflows.diagnose.hypotheses import _element_search
+from phs.workflows.diagnose.element_search import element_search, extrapolate
 
 SPECS = [("tau_d", 0.5, 0.0, 8.0)]  # a delay's range: 0 to 8 s, log-spaced grid from 8 ms
 
@@ -25,7 +25,7 @@ def _counted(minimum: float, floor: float = 0.0):
 
 def test_whole_grid_search_finds_the_minimum():
     cost, calls = _counted(2.0)
-    found = _element_search(cost, SPECS, [0.5])[0]
+    found = element_search(cost, SPECS, [0.5])[0]
     # Brent's bounded method within the bracket of grid points around 2 s (1.42 to 3.37 s), at most 8 steps
     assert math.isclose(found, 2.0, rel_tol=1e-2)
     assert len(calls) >= 10  # the grid: 0 and nine log-spaced points
@@ -33,7 +33,7 @@ def test_whole_grid_search_finds_the_minimum():
 
 def test_local_search_refines_a_nearby_start_without_the_grid():
     cost, calls = _counted(2.0)
-    found = _element_search(cost, SPECS, [1.7], local=True)[0]
+    found = element_search(cost, SPECS, [1.7], local=True)[0]
     assert math.isclose(found, 2.0, rel_tol=1e-2)
     # the refinement (at most 8), the bracket's two ends and the start's own cost, no grid (the whole
     # search costs the grid's ten more)
@@ -42,7 +42,7 @@ def test_local_search_refines_a_nearby_start_without_the_grid():
 
 def test_local_search_falls_back_to_the_grid_when_the_minimum_is_far():
     cost, calls = _counted(6.0)
-    found = _element_search(cost, SPECS, [0.05], local=True)[0]
+    found = element_search(cost, SPECS, [0.05], local=True)[0]
     # the bracket around 0.05 s ends at its upper edge: the whole grid then finds 6 s
     assert math.isclose(found, 6.0, rel_tol=1e-2)
     assert len(calls) > 18
@@ -53,5 +53,41 @@ def test_search_never_ends_above_its_start():
     def cost(theta):
         return 0.0 if theta[0] == 1.234 else 1.0
 
-    assert _element_search(cost, SPECS, [1.234], local=True) == [1.234]
-    assert _element_search(cost, SPECS, [1.234]) == [1.234]
+    assert element_search(cost, SPECS, [1.234], local=True) == [1.234]
+    assert element_search(cost, SPECS, [1.234]) == [1.234]
+
+
+def _valley(th, v):
+    """A narrow valley along ``theta = b`` with its minimum at (1, 1): alternating searches of ``theta``
+    and ``b`` zigzag along it."""
+    return (th[0] - v["b"]) ** 2 + 0.01 * (th[0] + v["b"] - 2) ** 2
+
+
+def _alternate(theta, b, rounds, step):
+    """Rounds of exact minimisation in ``b`` then in ``theta``, with or without the step along each move."""
+    for _ in range(rounds):
+        start = ([theta], {"b": b})
+        b = (0.99 * theta + 0.02) / 1.01       # argmin over b of the valley
+        theta = (0.99 * b + 0.02) / 1.01       # argmin over theta
+        if step:
+            moved = extrapolate(_valley, [("a", 0.5, 0.0, 5.0)], ["b"], None, start, ([theta], {"b": b}), _valley([theta], {"b": b}))
+            if moved is not None:
+                (theta,), b = moved[0], moved[1]["b"]
+    return theta, b
+
+
+def test_the_step_along_a_zigzag_reaches_the_valley_floor():
+    # alternating alone creeps: each round closes about 4 % of the way to (1, 1)
+    slow = _alternate(0.2, 0.2, 8, step=False)
+    fast = _alternate(0.2, 0.2, 8, step=True)
+    assert abs(slow[0] - 1) > 0.4
+    assert abs(fast[0] - 1) < 0.4 * abs(slow[0] - 1) and _valley([fast[0]], {"b": fast[1]}) < _valley([slow[0]], {"b": slow[1]})
+
+
+def test_no_step_beyond_a_minimum_and_none_outside_the_bounds():
+    # a move that ended at the minimum: going on only climbs
+    assert extrapolate(_valley, [("a", 0.5, 0.0, 5.0)], ["b"], None, ([0.5], {"b": 0.5}), ([1.0], {"b": 1.0}), 0.0) is None
+    # the fit's bounds and the element's range hold: b may not pass 0.6, theta not 0.7
+    th, vals, _ = extrapolate(_valley, [("a", 0.5, 0.0, 0.7)], ["b"], {"b": (0.0, 0.6)}, ([0.3], {"b": 0.3}), ([0.4], {"b": 0.4}),
+                              _valley([0.4], {"b": 0.4}))
+    assert th[0] <= 0.7 and vals["b"] <= 0.6

@@ -12,6 +12,7 @@ import numpy as np
 from codegen import Simulator
 from phs.errors import PHSError
 from phs.signals import Sampled
+from phs.workflows.diagnose.element_search import element_search, extrapolate
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.identify.coordinates import CHANNEL_FLOOR
 from phs.workflows.recording import Recording
@@ -141,22 +142,29 @@ class Data:
 
 
 def _transformed(rec: Recording, element, where: str, theta) -> Recording:
-    """``rec`` with the input element (parameters ``theta``) applied to the command of every input of its
-    place (one input, or several driven together: :func:`components.candidates.base.input_members`)."""
+    """``rec`` with the model inputs the input element (parameters ``theta``) sets at its place
+    (:meth:`~components.candidates.elements.InputElement.drive`): the transformed command of every input
+    of the place (one input, or several driven together), or, between a controller and the plant, the
+    element's deviation from the recorded command."""
     if element is None:
         return rec
-    from components.candidates.base import input_members
-
     sig = dict(rec.signals)
-    for name in input_members(where):
-        sig[name] = element.transform(rec.t, np.asarray(rec[name], float), theta)
+    sig.update(element.drive(rec.t, sig, where, theta))
     return Recording(rec.t, sig, rec.source, rec.units)
+
+
+def _element_base(nominal: Scored, aug):
+    """The model an input element's hypothesis simulates, with the nominal values: the model it extends,
+    or, for an element inside a loop, that model with the element's deviation input (``aug.system``)."""
+    if list(aug.system.input_names) == list(nominal.system.input_names):
+        return nominal.system
+    return aug.system.with_params({k: v for k, v in nominal.values.items() if k in aug.system.param_names})
 
 
 def command(rec: Recording, where: str) -> np.ndarray:
     """The recorded command at an input element's place (its first input's: the inputs of a place share
     their command in the training recording, which is how the place was formed)."""
-    from components.candidates.base import input_members
+    from components.candidates.elements import input_members
 
     return np.asarray(rec[input_members(where)[0]], float)
 
@@ -393,7 +401,8 @@ def neutral_point(nominal: Scored, aug, data: Data) -> Scored:
     n_params = len(data.free) + max(len(aug.free), aug.n_params)
     if aug.element is not None or not aug.neutral:
         theta = aug.element.neutral(data.recording.t, command(data.recording, aug.attached_to)) if aug.element else None
-        h = Scored(label, nominal.system, dict(nominal.values), nominal.x0, n_params, dict(nominal.fit_percent),
+        h = Scored(label, _element_base(nominal, aug) if aug.element else nominal.system, dict(nominal.values), nominal.x0, n_params,
+                   dict(nominal.fit_percent),
                    dict(nominal.validation_fit_percent), nominal.rss, nominal.validation_rss, math.inf, nominal.residuals,
                    dict(nominal.simulated), 0.0, aug)
         if theta is not None:
@@ -455,12 +464,13 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         sim = Simulator(system, rtol=rtol, energy=False)
         seen: dict = {}
 
-        def cost(theta):  # one simulation per distinct trial (the neutral point is often on the grid)
-            key = tuple(float(v) for v in theta)
+        def cost(theta, values=None):  # one simulation per distinct trial (the neutral point is often on the grid)
+            params = {k: float(values[k]) for k in data.free} if values is not None else None
+            key = tuple(float(v) for v in theta) + tuple(sorted((params or {}).items()))
             if key not in seen:
                 r = _transformed(rec, el, where, theta)
                 try:
-                    s = _simulate(system, r, x0, sim=sim)
+                    s = _simulate(system, r, x0, params=params, sim=sim)
                     seen[key] = sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
                 except (PHSError, RuntimeError):
                     seen[key] = math.inf
@@ -468,12 +478,13 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
 
         return cost
 
-    cost = cost_of(nominal.system, nominal.x0)
+    base = _element_base(nominal, aug)
+    cost = cost_of(base, nominal.x0)
     if aug.starts:  # around a start (a refit's screened values), the whole grid when it does not hold
         start = aug.starts[0]
-        theta = _element_search(cost, specs, [start.get(f"{el.effect}.{s[0]}", s[1]) for s in specs], local=True)
+        theta = element_search(cost, specs, [start.get(f"{el.effect}.{s[0]}", s[1]) for s in specs], local=True)
     else:
-        theta = _element_search(cost, specs, [s[1] for s in specs])
+        theta = element_search(cost, specs, [s[1] for s in specs])
     neutral = el.neutral(rec.t, command(rec, where))
     if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
         theta = [float(v) for v in neutral]
@@ -481,11 +492,12 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     if data.free or data.estimate_x0:  # refit the model through the element
         from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
-        before = cost(theta)
+        before, stepped = cost(theta), False
         for _ in range(ELEMENT_ROUNDS if joint else 1):
+            start = (list(theta), dict(values))
             try:
-                fit = identify(nominal.system.with_params(values), _transformed(rec, el, where, theta), data.free,
-                               bounds=data.bounds or None, x0=dict(zip(nominal.system.state_names, map(float, x0), strict=True)),
+                fit = identify(base.with_params(values), _transformed(rec, el, where, theta), data.free,
+                               bounds=data.bounds or None, x0=dict(zip(base.state_names, map(float, x0), strict=True)),
                                outputs=outs, log_scale=data.log_scale or None, rtol=rtol,
                                max_iter=max_iter or (30 if joint else SCREEN_ITER), ftol=ftol,
                                compile=None if joint else False, estimate_x0=data.estimate_x0, weights=_fixed(data.weights))
@@ -493,67 +505,27 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
                 if not recovery:
                     recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the values before it"
                 break
-            cost = cost_of(nominal.system.with_params(fit.values), fit.x0)
+            cost = cost_of(base.with_params(fit.values), fit.x0)
             refitted = cost(theta)
             if not refitted <= before:  # a refit that ends worse is not taken
                 break
             values, x0 = fit.values, fit.x0
             if not joint:
                 break
-            if before - refitted <= ELEMENT_TOL * before:  # the model hardly moved: neither will the element
+            if before - refitted <= ELEMENT_TOL * before and not stepped:  # the model hardly moved: neither will the element
                 break
-            theta = _element_search(cost, specs, theta, local=True)
+            theta = element_search(cost, specs, theta, local=True)
             after = cost(theta)
             if before - after <= ELEMENT_TOL * before:
                 break
+            moved = extrapolate(cost_of(base, x0), specs, data.free, data.bounds, start, (theta, values), after, ELEMENT_TOL)
+            stepped = moved is not None  # the element was not searched at the stepped model: the next round does
+            if stepped:
+                theta, values, after = moved
+                cost = cost_of(base.with_params(values), x0)
             before = after
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
-    h = score(f"{aug.effect}@{where}", nominal.system, values, x0, len(data.free) + len(specs), data,
+    h = score(f"{aug.effect}@{where}", base, values, x0, len(data.free) + len(specs), data,
               augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
     h.recovery = recovery
     return _never_worse(nominal, h, aug, data, t0)
-
-
-def _element_search(cost, specs, theta, local: bool = False) -> list[float]:
-    """Each of an input element's parameters in turn: a coarse grid over its range (log-spaced where the
-    range is positive, with 0 when the range starts there), then a bounded refinement around the best grid
-    point; never ends above the cost of ``theta`` itself.  ``local``: the refinement only, between the grid
-    points either side of the point of the grid nearest ``theta`` (a later round of a joint fit, where the
-    model's refit moved the element's optimum a little); the whole grid when the refinement ends no lower
-    than both ends of that bracket (no valley inside it) or ``theta`` lies outside the grid."""
-    import scipy.optimize
-
-    theta = [float(v) for v in theta]
-    for k, (_name, _start, lo, hi) in enumerate(specs):
-        grid = np.geomspace(max(lo, 1e-3 * hi), hi, 9) if lo >= 0 else np.linspace(lo, hi, 9)
-        if lo == 0:
-            grid = np.concatenate([[0.0], grid])
-
-        def f1(v, k=k):
-            th = list(theta)
-            th[k] = v
-            return cost(th)
-
-        def refine(a, c):
-            r = scipy.optimize.minimize_scalar(f1, bounds=(a, c), method="bounded", options={"xatol": 1e-3 * (c - a), "maxiter": 8})
-            return float(r.x), float(r.fun)
-
-        best = None
-        if local and grid[1] <= theta[k] <= grid[-1]:
-            i = int(np.argmin(np.abs(grid - theta[k]))) if lo < 0 else int(np.argmin(np.abs(np.log(grid[1:] / theta[k])))) + 1
-            a, c = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-            x, fx = refine(a, c)
-            if fx < min(f1(a), f1(c)):  # below both ends: the bracket holds a valley
-                best = (x, fx)
-        if best is None:
-            vals = [f1(g) for g in grid]
-            b = int(np.argmin(vals))
-            best = (float(grid[b]), vals[b])
-            a, c = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
-            if c > a:
-                x, fx = refine(a, c)
-                if fx <= best[1]:
-                    best = (x, fx)
-        if best[1] <= f1(theta[k]):
-            theta[k] = best[0]
-    return theta

@@ -147,7 +147,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         augs = []
         for c in pool:
             # an input element goes where the command varies, inputs driven together as one place
-            places = (c.places(current.system, {n: data.recording[n] for n in current.system.input_names})
+            places = (c.places(current.system, data.recording.signals)
                       if c.kind == "input" else c.attach_points(current.system))
             for w in places:
                 if any(a.augmentation.effect == c.effect and a.augmentation.attached_to == w for a in accepted):
