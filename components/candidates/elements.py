@@ -124,7 +124,8 @@ def _is_deviation(system, name: str) -> bool:
 
 def driven_body(system, channel: str) -> str:
     """The momentum state the controller whose command is ``channel`` drives: the one body on which the
-    command's reference inputs (the inputs its expression reads) act through the input map.
+    command's reference inputs (the inputs its expression reads, or whose conjugate outputs it reads) act
+    through the input map (``G`` or ``P``).
 
     Examples
     --------
@@ -136,10 +137,11 @@ def driven_body(system, channel: str) -> str:
     >>> driven_body(servo, "u_c")
     'm.p'
     """
-    expr = sp.sympify(system.measured[system.measured_names.index(channel)].expr)
-    refs = [j for j, inp in enumerate(system.inputs) if inp.symbol in expr.free_symbols]
+    reads = {str(v) for v in getattr(system.measured[system.measured_names.index(channel)].expr, "free_symbols", ())}
+    refs = [j for j, inp in enumerate(system.inputs) if inp.name in reads or (inp.output and inp.output in reads)]
     names = system.state_names
-    bodies = [p for p in momentum_states(system) if any(system.G[names.index(p), j] != 0 for j in refs)]
+    bodies = [p for p in momentum_states(system) if any(system.G[names.index(p), j] != 0 or system.P[names.index(p), j] != 0
+                                                         for j in refs)]
     if len(bodies) != 1:
         raise ModelError(f"command {channel!r} of {system.name!r}: its references drive {len(bodies)} bodies "
                          f"({', '.join(bodies) or 'none'}); an element between the controller and the plant needs exactly one")

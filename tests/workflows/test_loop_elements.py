@@ -56,6 +56,18 @@ def test_the_deviation_is_a_force_at_the_driven_body():
     assert s.J == servo.J and s.R == servo.R and s.G[:, :j] == servo.G
 
 
+def test_a_velocity_loop_drives_its_body_too():
+    from components import Damper, LinearSpring, Mass, VelocityLoop
+    from phs import interconnect, series
+
+    vc = VelocityLoop("vc", K_v=5.0, effort="u_c")
+    s = interconnect("vservo", [Mass("m", m=0.5), LinearSpring("k", K=40.0), Damper("b", b=1.0), vc], [series("m", "k", "b", "vc")])
+    # its command reads the reference's conjugate output, and the reference acts through P
+    assert command_channels(s) == ["u_c"] and driven_body(s, "u_c") == "m.p"
+    w = with_deviation(s, "u_c", "input_saturation")
+    assert w.check().ok and w.input_names == ["r_v", "u_c.input_saturation"]
+
+
 def test_attach_points_are_the_commands_and_never_a_deviation():
     servo = nominal()
     assert TimeDelay().attach_points(servo) == ["r", "u_c"]
