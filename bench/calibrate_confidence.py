@@ -2,7 +2,9 @@
 
 Runs ``phs.diagnose`` on the concealed cases of ``examples/concealed_effects.py`` at several effect
 strengths (``size``: the effect's tuned strength times 0.35, 0.6, 1) and noise seeds, 3 s recordings,
-and records for each the verdict, whether it names the truth (``none`` for the control), and the raw
+and records for each the verdict, whether it names the truth (``none`` for the control), the share of
+the mismatch it explains and whether its residual stays above the noise (``explained_share``,
+``residual_above_noise``: what :func:`phs.workflows.diagnose.ranking.partial` reads), and the raw
 score the confidence is built from (``Diagnosis.verdict["score"]``: ``0.5 + 0.5 (g1 - g2) / g1``
 for an effect, ``1 - g / (2 MIN_VALIDATION_GAIN)`` for ``none``, before the calibration, the failure
 factor and the cap).  Then it fits the share of right verdicts as a non-decreasing function of the raw
@@ -64,6 +66,8 @@ def run(shard: int, n_shards: int, out: str, seconds: float) -> None:
         d = diagnose(electrostatic_actuator(), train, validation=val, free=list(NOMINAL_FREE), n_jobs=1)
         row = {"effect": effect, "size": size, "seed": seed, "verdict": d.effect, "right": d.effect == effect,
                "score": d.verdict["score"], "confidence": d.verdict["confidence"], "failed": len(d.verdict["failed"]),
+               "explained_share": round(float(d.verdict.get("explained_share", 0.0)), 4),
+               "residual_above_noise": bool(d.verdict.get("residual_above_noise", False)),
                "seconds": round(time.perf_counter() - t0, 1)}
         print(json.dumps(row), flush=True)
         lines.append(json.dumps(row))

@@ -5,10 +5,13 @@ recording comes from a truth that contains one effect the nominal model lacks, i
 different from the library's candidate (``examples/concealed_effects.py``), with a validation
 recording of its own.  The closed-loop cases (``examples/concealed_loops.py``: a plant under a known
 PD loop, the reference recorded as the input; dry friction read by a quantised encoder beside a
-noisy force channel, absorbed by the nominal damping, or with a hardening spring) are named
-``loop:CASE``.  For every case the script runs ``phs.diagnose`` with every candidate, times it, and
-checks the verdict against the truth.  Target: 40 s per case on an idle 2-core machine, 60 s under load
-(other jobs running: a 1-min load average above the CPUs before the cases).
+noisy force channel, absorbed by the nominal damping, or with a hardening spring; a delay or a clip
+of the force between the controller and the plant) are named ``loop:CASE``; ``loop:loop_delay`` and
+``loop:drive_saturation`` are not among the default cases (run them with ``--effects``) and are right
+only with the element at the controller's command.  For every case the script runs ``phs.diagnose``
+with every candidate, times it, and checks the verdict against the truth.  Target: 40 s per case on an
+idle 2-core machine, 60 s under load (other jobs running: a 1-min load average above the CPUs before the
+cases).
 
     python bench/diagnose.py                       # default cases, 20 s recordings
     python bench/diagnose.py --effects all         # every effect of both generators (long)
@@ -53,8 +56,10 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
         val, _ = concealed_loops.generate(case, seconds=seconds, seed=2, validation=True)
         model, free = concealed_loops.nominal(), concealed_loops.NOMINAL_FREE
 
-        def right(d):  # every concealed effect named, nothing else
-            return sorted(d.verdict["effects"]) == sorted(info["effects"])
+        def right(d):  # every concealed effect named, nothing else (and at its place, when the case says)
+            where = info.get("place")
+            return (sorted(d.verdict["effects"]) == sorted(info["effects"])
+                    and (where is None or all(a.augmentation.attached_to == where for a in d.accepted)))
     else:
         train, _ = generate(effect, seconds=seconds, seed=1)
         val, _ = generate(effect, seconds=seconds, seed=2, validation=True)

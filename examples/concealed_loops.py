@@ -31,7 +31,8 @@ Cases (:data:`CASES`; each names the effects the diagnosis should find, ``info["
 The last two are not port-Hamiltonian (a delay or a clip inside the loop): their truth is integrated
 by :func:`simulate_loop` (classical Runge-Kutta, ten steps per sample, the command held over each).
 
-:func:`generate` returns a :class:`phs.workflows.recording.Recording` and what the truth was.
+:func:`generate` returns a :class:`phs.workflows.recording.Recording` and what the truth was (for the
+elements inside the loop, ``info["place"]``: where the diagnosis should put them, the command ``u_c``).
 Training references: held set points every 0.5 s plus a slow sine; validation: other set points
 and a faster sine.  Sampled at 1 kHz.
 """
@@ -162,10 +163,10 @@ def generate(case: str, seconds: float = 4.0, seed: int = 1, validation: bool = 
     info = {"case": case, "effects": list(_EFFECTS[case]), "b": b, "F_c": fc, "v_s": vs, "K3": k3}
     if case == "loop_delay":
         pos, uc = simulate_loop(t, r, delay=LOOP_DELAY)
-        info["tau_d"] = LOOP_DELAY
+        info["tau_d"], info["place"] = LOOP_DELAY, "u_c"
     elif case == "drive_saturation":
         pos, uc = simulate_loop(t, r, limit=DRIVE_LIMIT)
-        info["F_max"] = DRIVE_LIMIT
+        info["F_max"], info["place"] = DRIVE_LIMIT, "u_c"
     else:
         from codegen import simulator
 

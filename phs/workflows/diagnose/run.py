@@ -12,7 +12,7 @@ import numpy as np
 from phs.errors import InputDataError, ParameterError
 from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick, partial
 from phs.workflows.diagnose.result import Diagnosis, _verdict
 from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _screen_and_refit
 
@@ -250,6 +250,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                                    "for part of it.")
         verdict["dropped"] = [lab for lab, _, _ in dropped]
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
+    verdict["residual_above_noise"] = bool(_structured(final, noise, outs) or _coloured(final_findings, final, data))
+    verdict = partial(verdict)
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)
 
