@@ -15,6 +15,7 @@ from components import (
     LinearSpring,
     Mass,
     NonlinearSpring,
+    PositionLoop,
     Resistor,
     VoltageSource,
 )
@@ -97,3 +98,25 @@ def duffing_oscillator(m: float = 1.0, k: float = 1.0, k3: float = 0.5, b: float
         comps.append(Damper("b", b=b))
         members.append("b")
     return interconnect("duffing", comps, [series(*members)], description="Duffing oscillator")
+
+
+def pd_servo(m: float = 0.5, k: float = 40.0, b: float = 1.0, K_p: float = 400.0, K_d: float = 6.0, tau: float | None = 0.01) -> PHSystem:
+    """A mass on a spring and damper under PD position control on a filtered reference (time constant
+    ``tau``): input the reference ``r`` [m], measured the controller's force ``u_c`` [N] (a computed
+    command, ``Measured.command``) and the position [m].  Linear: the closed loop has
+    ``ω_n² = (k + K_p)/m`` (see ``docs/workflows/closed_loop.md``).
+
+    Examples
+    --------
+    >>> s = pd_servo()
+    >>> s.input_names, s.measured_names, [m.command for m in s.measured]
+    (['r'], ['u_c', 'position'], [True, False])
+    """
+    return interconnect(
+        "servo",
+        [Mass("m", m=m), LinearSpring("k", K=k), Damper("b", b=b),
+         PositionLoop("pd", K_p=K_p, K_d=K_d, tau=tau, position="k.l", effort="u_c")],
+        [series("m", "k", "b", "pd")],
+        measured=[Measured("position", symbol_of_state("k.l"), "m", "position of the mass")],
+        description="mass-spring-damper under PD position control",
+    )

@@ -65,11 +65,8 @@ def command_channels(system) -> list[str]:
 
     Examples
     --------
-    >>> from components import Damper, LinearSpring, Mass, PositionLoop
-    >>> from phs import interconnect, series
-    >>> pd = PositionLoop("pd", K_p=400.0, K_d=6.0, position="k.l", effort="u_c")
-    >>> parts = [Mass("m", m=0.5), LinearSpring("k", K=40.0), Damper("b", b=1.0), pd]
-    >>> servo = interconnect("servo", parts, [series("m", "k", "b", "pd")])
+    >>> from systems.examples import pd_servo
+    >>> servo = pd_servo()
     >>> command_channels(servo)
     ['u_c']
     """
@@ -129,11 +126,8 @@ def driven_body(system, channel: str) -> str:
 
     Examples
     --------
-    >>> from components import Damper, LinearSpring, Mass, PositionLoop
-    >>> from phs import interconnect, series
-    >>> pd = PositionLoop("pd", K_p=400.0, K_d=6.0, position="k.l", effort="u_c")
-    >>> parts = [Mass("m", m=0.5), LinearSpring("k", K=40.0), Damper("b", b=1.0), pd]
-    >>> servo = interconnect("servo", parts, [series("m", "k", "b", "pd")])
+    >>> from systems.examples import pd_servo
+    >>> servo = pd_servo()
     >>> driven_body(servo, "u_c")
     'm.p'
     """
@@ -155,11 +149,8 @@ def with_deviation(system, channel: str, effect: str) -> PHSystem:
 
     Examples
     --------
-    >>> from components import Damper, LinearSpring, Mass, PositionLoop
-    >>> from phs import interconnect, series
-    >>> pd = PositionLoop("pd", K_p=400.0, K_d=6.0, position="k.l", effort="u_c")
-    >>> parts = [Mass("m", m=0.5), LinearSpring("k", K=40.0), Damper("b", b=1.0), pd]
-    >>> servo = interconnect("servo", parts, [series("m", "k", "b", "pd")])
+    >>> from systems.examples import pd_servo
+    >>> servo = pd_servo()
     >>> s = with_deviation(servo, "u_c", "time_delay")
     >>> s.input_names, s.check().ok
     (['r', 'u_c.time_delay'], True)
