@@ -115,7 +115,8 @@ class PositionLoop(Component):
 
     def piece(self) -> Piece:
         kp, d1 = self._param("K_p", self.K_p, "N/m", "proportional gain (virtual stiffness)")
-        kd, d2 = self._param("K_d", self.K_d, "N*s/m", "derivative gain (virtual damping)")
+        # a zero gain (P control) keeps a nonnegative range: the structural checks sample parameters over it
+        kd, d2 = self._param("K_d", self.K_d, "N*s/m", "derivative gain (virtual damping)", (0.0, 1.0) if self.K_d == 0 else None)
         params = d1 + d2
         port = self._port("p", "translational")
         ref = self._port("ref", "any", supplies=True)

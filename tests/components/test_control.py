@@ -109,3 +109,12 @@ def test_velocity_loop_reaches_the_damped_reference_speed():
 def test_invalid_gains_are_refused(kw, culprit):
     with pytest.raises(ModelError, match=culprit):
         PositionLoop("pd", **kw)
+
+
+def test_proportional_control_alone_passes_the_structural_checks():
+    # K_d = 0 (P control) is allowed; its parameter's range stays nonnegative, so the sampled checks pass
+    # (with the default range of a zero value, (-1, 1), they sampled a negative damping and failed)
+    pd = PositionLoop("pd", K_p=400.0, K_d=0.0, position="k.l", effort="u_c")
+    s = interconnect("servo", [Mass("m", m=0.5), LinearSpring("k", K=40.0), Damper("b", b=1.0), pd], [series("m", "k", "b", "pd")])
+    assert s.check().ok
+    assert dict((p.name, p.range) for p in s.params)["pd.K_d"] == (0.0, 1.0)
