@@ -317,8 +317,8 @@ def _assemble(name, pieces, connections, extra_params, measured, conditions, des
     meas = []
     for mo in [mo for pc in pieces for mo in pc.measured] + measured:
         if isinstance(mo, tuple):
-            mo = Measured(mo[0], sp.sympify(mo[1]))
-        meas.append(replace(mo, expr=subst(sp.sympify(mo.expr))))
+            mo = Measured(mo[0], mo[1])
+        meas.append(replace(mo, expr=subst(_expression(mo.expr, f"measured output {mo.name!r} of {name!r}"))))
     conds = [Condition(c.label, subst(c.expr), c.description) for pc in pieces for c in pc.conditions]
     conds += [Condition(c.label, subst(c.expr), c.description) for c in conditions]
 
@@ -456,3 +456,18 @@ def _explain(err: StructuralProblem, equations, eq_where, co, ports) -> str:
     if err.kind == "singular":
         return "the equations of " + "; ".join(where) + " are singular (a degenerate transformer ratio or a resistor of value zero?)"
     return "the relations of " + "; ".join(where) + " are not linear in the port variables"
+
+
+def _expression(value, where: str) -> sp.Expr:
+    """``value`` as a sympy expression: a sympy object or a number, never a string (a string would be
+    parsed by ``eval``; expressions from files go through :mod:`phs.safe_parse`).
+
+    Examples
+    --------
+    >>> _expression(2, "x"), _expression(sp.Symbol("q") ** 2, "x")
+    (2, q**2)
+    """
+    try:
+        return sp.sympify(value, strict=True)
+    except sp.SympifyError:
+        raise ModelError(f"{where}: expected a sympy expression or a number, got {type(value).__name__} {value!r}") from None

@@ -12,6 +12,7 @@ functions of state and input.
 from __future__ import annotations
 
 import hashlib
+from dataclasses import replace
 from functools import cached_property
 from numbers import Real
 from typing import TYPE_CHECKING
@@ -33,8 +34,28 @@ if TYPE_CHECKING:
 _NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, "numpy"]
 
 
+def _holds_string(M) -> bool:
+    """Whether a matrix given as (nested) lists holds a string entry: sympy would parse it with ``eval``."""
+    if isinstance(M, str):
+        return True
+    return isinstance(M, (list, tuple)) and any(_holds_string(v) for v in M)
+
+
+def _strict(value, what: str, problems: list[str]) -> sp.Expr:
+    """``value`` as a sympy expression, a number or a sympy object; a string is a problem (sympy would parse it
+    with ``eval``; expressions read from files go through :mod:`phs.safe_parse`)."""
+    try:
+        return sp.sympify(value, strict=True)
+    except sp.SympifyError:
+        problems.append(f"{what} is a {type(value).__name__}, not a sympy expression or a number: {value!r}")
+        return sp.Integer(0)
+
+
 def _as_matrix(M, rows: int, cols: int, what: str, problems: list[str]) -> sp.Matrix:
     if M is None:
+        return sp.zeros(rows, cols)
+    if _holds_string(M):
+        problems.append(f"{what} holds a string entry: give sympy expressions or numbers")
         return sp.zeros(rows, cols)
     try:
         M = sp.Matrix(M) if not isinstance(M, sp.MatrixBase) else sp.Matrix(M)
@@ -159,7 +180,7 @@ class PHSystem:
         if isinstance(H, (list, tuple)):
             self.energy_terms = tuple(H)
         else:
-            self.energy_terms = (EnergyTerm("H", sp.sympify(H)),)
+            self.energy_terms = (EnergyTerm("H", _strict(H, "H", problems)),)
         self.H = sp.Add(*[t.expr for t in self.energy_terms])
         n, m = len(self.states), len(self.inputs)
         self.J = _as_matrix(J, n, n, "J", problems)
@@ -169,7 +190,8 @@ class PHSystem:
         self.S = _as_matrix(S, m, m, "S", problems)
         self.N = _as_matrix(N, m, m, "N", problems)
         self.params = tuple(params)
-        self.measured = tuple(measured)
+        self.measured = tuple(m if isinstance(m.expr, sp.Basic)
+                              else replace(m, expr=_strict(m.expr, f"measured output {m.name!r}", problems)) for m in measured)
         self.dissipators = tuple(dissipators)
         self.definitions = tuple(definitions)
         self.description = description

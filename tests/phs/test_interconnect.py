@@ -604,3 +604,17 @@ def test_nested_and_named_junctions_agree():
     assert nested.state_names == named.state_names
     for M in ("J", "R", "G", "P", "S", "N"):
         assert sp.simplify(getattr(nested, M) - getattr(named, M)) == sp.zeros(*getattr(nested, M).shape)
+
+
+def test_a_measured_output_given_as_a_string_is_refused_not_parsed():
+    # a string would go through sympify's eval-based parser; the reader of files has its own whitelist
+    from components import Damper, ForceSource, LinearSpring, Mass
+    from phs import interconnect, series, symbol_of_state
+    from phs.errors import ModelError
+
+    parts = [ForceSource("F"), Mass("m", m=1.0), LinearSpring("k", K=4.0), Damper("b", b=0.4)]
+    with pytest.raises(ModelError, match=r"measured output 'y' of 'msd': expected a sympy expression or a number, got str"):
+        interconnect("msd", parts, [series("F", "m", "k", "b")], measured=[("y", "__import__('os').getcwd()")])
+    # an expression or a number in the same form is taken
+    s = interconnect("msd", parts, [series("F", "m", "k", "b")], measured=[("y", 2 * symbol_of_state("k.l")), ("c", 1)])
+    assert s.measured_names == ["y", "c"]

@@ -232,3 +232,24 @@ def test_errors_are_catchable_by_their_builtin_bases():
     assert issubclass(DomainError, ArithmeticError) and issubclass(phs.SimulationError, RuntimeError)
     err = ParameterError("system 'rc' has no parameter 'x'")
     assert str(err) == "system 'rc' has no parameter 'x'"  # not quoted like a KeyError
+
+
+@pytest.mark.parametrize("field", ["H", "J", "measured"])
+def test_strings_are_refused_not_parsed(field):
+    # sympy parses strings with eval; a PHSystem takes sympy expressions or numbers (files go through phs.safe_parse)
+    from phs import Measured
+
+    q = sp.Symbol("q", real=True)
+    kw = {"H": q**2 / 2, "J": [[0]], "R": [[1]]}
+    measured = [Measured("y", q)]
+    if field == "H":
+        kw["H"] = "__import__('os').getcwd()"
+    elif field == "J":
+        kw["J"] = [["__import__('os').getcwd()"]]
+    else:
+        measured = [Measured("y", "__import__('os').getcwd()")]
+    with pytest.raises(ModelError) as info:
+        PHSystem("s", ["q"], measured=measured, **kw)
+    assert "string" in str(info.value) or "str," in str(info.value)
+    # the same system with expressions is accepted
+    assert PHSystem("s", ["q"], H=q**2 / 2, J=[[0]], R=[[1]], measured=[Measured("y", q)]).H == q**2 / 2
