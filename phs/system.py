@@ -36,9 +36,7 @@ _NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, 
 
 def _holds_string(M) -> bool:
     """Whether a matrix given as (nested) lists holds a string entry: sympy would parse it with ``eval``."""
-    if isinstance(M, str):
-        return True
-    return isinstance(M, (list, tuple)) and any(_holds_string(v) for v in M)
+    return isinstance(M, str) or isinstance(M, (list, tuple)) and any(_holds_string(v) for v in M)
 
 
 def _strict(value, what: str, problems: list[str]) -> sp.Expr:
