@@ -85,7 +85,7 @@ def system_to_dict(system) -> dict[str, Any]:
         "energy": [{"label": e.label, "expr": sp.srepr(e.expr)} for e in s.energy_terms],
         "matrices": {k: srepr_matrix(getattr(s, k)) for k in _MATRICES},
         "measured": [
-            {"name": m.name, "expr": sp.srepr(sp.sympify(m.expr)), "unit": m.unit, "description": m.description,
+            {"name": m.name, "expr": sp.srepr(m.expr), "unit": m.unit, "description": m.description,
              **({"command": True} if m.command else {})}
             for m in s.measured
         ],

@@ -90,7 +90,7 @@ def neglect_states(system: PHSystem, patterns) -> PHSystem:
     terms = [t for t in terms if t.expr != 0] or [EnergyTerm("H", sp.Integer(0))]
     conditions = [Condition(c.label, c.expr.xreplace(zero), c.description) for c in system.conditions
                   if not c.label.endswith(f"in {system.name}")]
-    measured = [replace(m, expr=sp.sympify(m.expr).xreplace(zero)) for m in system.measured]
+    measured = [replace(m, expr=m.expr.xreplace(zero)) for m in system.measured]  # sympy objects: PHSystem refuses strings
     return PHSystem(
         f"{system.name}_design", [system.states[i] for i in keep], terms, sub(system.J), sub(system.R), rows(system.G),
         P=rows(system.P), S=system.S.xreplace(zero), N=system.N.xreplace(zero), inputs=system.inputs,
