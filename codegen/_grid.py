@@ -71,9 +71,11 @@ def snap_to_grid(t: np.ndarray, x: float, step: float | None = None) -> tuple[fl
     """
     h = step if step is not None else float(np.min(np.diff(t)))
     tol = min(_SNAP_REL * max(1.0, abs(x)), _SNAP_OF_STEP * h)
-    i = int(np.clip(np.searchsorted(t, x), 1, len(t) - 1))
-    i = i - 1 if abs(t[i - 1] - x) <= abs(t[i] - x) else i
-    return (float(t[i]), i) if abs(t[i] - x) <= tol else (float(x), None)
+    i = min(max(int(t.searchsorted(x)), 1), len(t) - 1)  # scalars: called twice per segment of every simulation
+    lo, hi = float(t[i - 1]), float(t[i])
+    if abs(lo - x) <= abs(hi - x):
+        i, hi = i - 1, lo
+    return (hi, i) if abs(hi - x) <= tol else (float(x), None)
 
 
 def equal_runs(pts) -> list[tuple[float, float, int]]:

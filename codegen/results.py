@@ -6,6 +6,7 @@ import io
 from functools import cached_property
 from typing import TYPE_CHECKING
 
+import casadi as ca
 import numpy as np
 
 from codegen.functions import generate
@@ -14,6 +15,36 @@ from phs.io import write_atomic
 if TYPE_CHECKING:
     import pandas as pd
     from matplotlib.figure import Figure
+
+
+_MAPPED: dict = {}
+"""Functions mapped over a number of samples, by (function, number), oldest dropped beyond :data:`_MAPPED_KEPT`."""
+_MAPPED_KEPT = 64
+
+
+def _mapped(f, n: int):
+    """``f`` with dense inputs and outputs, mapped serially over ``n`` samples (built once per function and
+    length: building a map of 20 000 samples costs as much as calling it ten times).
+
+    Examples
+    --------
+    >>> x = ca.SX.sym("x", 2)
+    >>> f = ca.Function("f", [x], [ca.vertcat(x[0] * x[1], 0)])
+    >>> _mapped(f, 3)(np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])).full().tolist()
+    [[4.0, 10.0, 18.0], [0.0, 0.0, 0.0]]
+    """
+    key = (id(f), n)
+    hit = _MAPPED.get(key)
+    if hit is not None and hit[0] is f:
+        return hit[1]
+    args = [ca.MX.sym(f"a{i}", f.size1_in(i), f.size2_in(i)) for i in range(f.n_in())]
+    outs = f.call(args)
+    dense = ca.Function(f"{f.name()}_dense", args, [ca.densify(o) for o in outs])
+    fm = dense.map(n) if n > 1 else dense
+    while len(_MAPPED) >= _MAPPED_KEPT:
+        _MAPPED.pop(next(iter(_MAPPED)))
+    _MAPPED[key] = (f, fm)
+    return fm
 
 
 class SimulationResult:
@@ -60,11 +91,20 @@ class SimulationResult:
 
     # -- derived signals, evaluated in one vectorised call each -----------------------
     def _map(self, f):
+        """``f(x, u, p)`` at every sample, one ``(nt, k)`` array per output of ``f``: one call of ``f`` mapped
+        over the samples (:func:`_mapped`), reading and writing numpy memory directly."""
         n = len(self.t)
-        fm = f.map(n, "thread", 2) if n > 1 else f
-        outs = fm(self.x.T, self.u.T, np.repeat(self.p[:, None], n, axis=1))
-        outs = outs if isinstance(outs, tuple) else (outs,)
-        return [np.asarray(o).T.reshape(n, -1) for o in outs]
+        fm = _mapped(f, n)
+        buf, trigger = fm.buffer()
+        args = [np.ascontiguousarray(self.x, dtype=float), np.ascontiguousarray(self.u, dtype=float),
+                np.ascontiguousarray(np.broadcast_to(self.p, (n, len(self.p))), dtype=float)]
+        for i, a in enumerate(args):  # C-ordered (n, k) is CasADi's column-major (k, n)
+            buf.set_arg(i, memoryview(a))
+        outs = [np.empty((n, f.sparsity_out(i).numel())) for i in range(f.n_out())]
+        for i, o in enumerate(outs):
+            buf.set_res(i, memoryview(o))
+        trigger()
+        return outs
 
     @cached_property
     def _power(self):

@@ -28,7 +28,6 @@ the collection of integrator outputs on the grid (:mod:`codegen._output`).
 
 from __future__ import annotations
 
-import hashlib
 import time as _time
 
 import casadi as ca
@@ -37,8 +36,9 @@ import sympy as sp
 
 from codegen._domain import DomainCheck, fmt_state
 from codegen._grid import sampled_pieces, step_windows, time_grid
-from codegen._inputs import baked, initial_state, input_signals, plan_segments, run_sampled, segment_inputs
-from codegen._output import call_into_numpy, energy_accounts, energy_columns, output_runs
+from codegen._inputs import initial_state, input_signals, run_sampled, segment_inputs
+from codegen._output import call_into_numpy, energy_accounts, energy_columns
+from codegen._plan import digest, plan_for
 from codegen.discrete_gradient import discrete_gradient_simulate
 from codegen.functions import _model_hash, generate
 from codegen.results import SimulationResult
@@ -47,6 +47,9 @@ from phs.errors import InputDataError, SimulationError
 from phs.params import TIME
 
 __all__ = ["simulate", "simulator", "Simulator", "sampled_pieces", "step_windows"]
+
+_CALLS_KEPT = 8
+"""Plans whose integrator calls a simulator keeps (:meth:`Simulator._calls`)."""
 
 
 def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: float | None = None,
@@ -86,7 +89,7 @@ def simulator(system, rtol: float = 1e-8, atol: float | None = None, max_steps: 
 
 def _digest(g) -> str:
     """A digest of sampled times and values ``g`` (the key of the integrators that interpolate them)."""
-    return hashlib.sha1(np.ascontiguousarray(g[0]).tobytes() + np.ascontiguousarray(g[1]).tobytes()).hexdigest()
+    return digest(g[:2])
 
 
 _INTERPOLANTS: dict = {}
@@ -175,6 +178,7 @@ class Simulator:
         self._integrators: dict = {}
         self._templates: dict = {}
         self._domain = DomainCheck(system, self.f)
+        self._plan_calls: dict = {}
 
     # -- integrator construction ------------------------------------------------------------
     def _integrator(self, n: int, slots, sampled, max_step: float = 1.0):
@@ -282,41 +286,40 @@ class Simulator:
         p = s.param_vector(params, signs=signs)
         x = self.initial_state(x0)
         self._check_domain(x[None, :], t[:1], p, np.zeros((1, len(s.inputs))))
-        sigs = input_signals(s, u, t)
-        segs, slots = plan_segments(sigs, t)
+        plan = plan_for(t, input_signals(s, u, t))
         if len(x) == 0:  # a static network: nothing to integrate, outputs follow the inputs
-            return self._static_result(t, sigs, segs, slots, p, wall)
-        # a sampled input's samples with their digest (computed once: the integrators are keyed by it)
-        sampled = [(*baked(sg), _digest(baked(sg))) if baked(sg) is not None else None for sg in sigs]
+            return self._static_result(t, plan.sigs, plan.segs, plan.slots, p, wall)
         nq = len(energy_columns(s)) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))
         X[0] = x
-        U = np.zeros((len(t), len(s.inputs)))
+        U = plan.U.copy()
         z = x / self.scale
         qacc = np.zeros(nq)
-        nrun = 0
-        for r in output_runs(t, sigs, segs, lambda choice, times: self._eval_inputs(sigs, slots, choice, times), U):
-            F, layout = self._integrator(r.n, slots, run_sampled(sampled, r.choice), r.max_step)
-            P = self._pvec(p, r.start, r.step, layout, r.choice)
+        done = []  # (states, times, inputs) of every run so far: the domain is checked over all of them at once
+        for r, (F, tail) in zip(plan.runs, self._calls(plan), strict=True):
+            P = np.concatenate((p, tail))
             try:
                 zs, qs = call_into_numpy(F, z, P, len(x), r.n, nq)
             except RuntimeError as exc:
+                self._check_done(done, p)  # a state that left the domain earlier is what went wrong
                 try:  # once more from the state with its vanishing components set to zero
                     zs, qs = call_into_numpy(F, np.where(np.abs(z) < NEGLIGIBLE, 0.0, z), P, len(x), r.n, nq)
                 except RuntimeError:
-                    self._localize_failure(F, z, p, r.start, r.step, r.n, slots, run_sampled(sampled, r.choice), layout, r.choice,
-                                           exc, sigs)
+                    self._localize_failure(F, z, p, r.start, r.step, r.n, plan.slots, run_sampled(plan.sampled, r.choice),
+                                           self._calls_layout(plan, r), r.choice, exc, plan.sigs)
             xs = zs * self.scale
             if not np.all(np.isfinite(xs)):
+                self._check_done(done, p)
                 k = int(np.argmin(np.all(np.isfinite(xs), axis=1)))
                 raise SimulationError(f"simulation of {s.name!r}: non-finite state at t={r.times[k]:.6g}: " + fmt_state(s, xs[k]))
-            self._check_domain(xs, r.times, p, r.u)
+            done.append((xs, r))
             r.store(X, xs)
             r.store(Q, qacc + qs)
             qacc = qacc + qs[-1]
             z = zs[-1]
-            nrun += 1
+        self._check_done(done, p)
+        nrun = len(plan.runs)
         res = SimulationResult(s, t, X, U, p, stats={"runs": nrun, "seconds": _time.perf_counter() - wall,
                                                      "method": "cvodes", "rtol": self.rtol, "atol": self.atol})
         if self.energy:
@@ -360,6 +363,31 @@ class Simulator:
 
     def _check_domain(self, xs, times, p, uu) -> None:
         self._domain(xs, times, p, uu)
+
+    def _calls(self, plan) -> list:
+        """``(integrator, parameter tail)`` of each of ``plan``'s runs for this simulator: the run's
+        integrator and the part of its parameter vector after the model's parameters (computed once per
+        plan; :data:`_CALLS_KEPT` plans kept)."""
+        hit = self._plan_calls.get(id(plan))
+        if hit is not None and hit[0] is plan:
+            return hit[1]
+        calls = []
+        for r in plan.runs:
+            F, layout = self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step)
+            calls.append((F, self._pvec(np.zeros(0), r.start, r.step, layout, r.choice)))
+        while len(self._plan_calls) >= _CALLS_KEPT:
+            self._plan_calls.pop(next(iter(self._plan_calls)))
+        self._plan_calls[id(plan)] = (plan, calls)
+        return calls
+
+    def _calls_layout(self, plan, r):
+        return self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step)[1]
+
+    def _check_done(self, done, p) -> None:
+        """The validity domain over the output steps of the runs ``done`` (``(states, run)`` pairs) in one call."""
+        if done and self.system.conditions:
+            self._check_domain(np.vstack([xs for xs, _ in done]), np.concatenate([r.times for _, r in done]), p,
+                               np.vstack([r.u for _, r in done]))
 
     def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, exc, sigs):
         """Re-run the failed run one output step at a time to name the failing interval and state."""
