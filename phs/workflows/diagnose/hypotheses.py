@@ -115,6 +115,7 @@ class Data:
     estimate_x0: tuple = ()
     weights: object = None     # channel weights of every fit: None (1 / std of the channel), "ml" or a dict;
     #                            after the nominal fit, the dict it ended with (every hypothesis uses the same)
+    given: dict | None = None  # the free parameters' values the model was built with (set by the nominal fit)
 
     @property
     def n_train(self) -> int:
@@ -459,6 +460,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
     rtol = _fit_rtol(data, joint)
+    from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
     def cost_of(system, x0):
         sim = Simulator(system, rtol=rtol, energy=False)
@@ -478,54 +480,104 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
 
         return cost
 
+    def alternate(first, values, x0, neutral):
+        """One fit of an input element from the model values ``values``: the element's search (around ``first``,
+        or over its whole grid), never ending above ``neutral`` (the element's neutral point, when given), then
+        alternating refits of the model through it (:data:`ELEMENT_ROUNDS`, one when screening).  Returns
+        ``(theta, values, x0, recovery, training cost)``."""
+        cost = cost_of(base.with_params(values), x0)
+        theta = (element_search(cost, specs, first, local=True) if first is not None
+                 else element_search(cost, specs, [s[1] for s in specs]))
+        if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
+            theta = [float(v) for v in neutral]
+        recovery = ""
+        if data.free or data.estimate_x0:  # refit the model through the element
+            before, stepped = cost(theta), False
+            for _ in range(ELEMENT_ROUNDS if joint else 1):
+                start = (list(theta), dict(values))
+                try:
+                    fit = identify(base.with_params(values), _transformed(rec, el, where, theta), data.free,
+                                   bounds=data.bounds or None, x0=dict(zip(base.state_names, map(float, x0), strict=True)),
+                                   outputs=outs, log_scale=data.log_scale or None, rtol=rtol,
+                                   max_iter=max_iter or (30 if joint else SCREEN_ITER), ftol=ftol,
+                                   compile=None if joint else False, estimate_x0=data.estimate_x0, weights=_fixed(data.weights))
+                except RECOVERABLE as exc:
+                    if not recovery:
+                        recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the values before it"
+                    break
+                cost = cost_of(base.with_params(fit.values), fit.x0)
+                refitted = cost(theta)
+                if not refitted <= before:  # a refit that ends worse is not taken
+                    break
+                values, x0 = fit.values, fit.x0
+                if not joint:
+                    break
+                if before - refitted <= ELEMENT_TOL * before and not stepped:  # the model hardly moved: neither will the element
+                    break
+                theta = element_search(cost, specs, theta, local=True)
+                after = cost(theta)
+                if before - after <= ELEMENT_TOL * before:
+                    break
+                moved = extrapolate(cost_of(base, x0), specs, data.free, data.bounds, start, (theta, values), after, ELEMENT_TOL)
+                stepped = moved is not None  # the element was not searched at the stepped model: the next round does
+                if stepped:
+                    theta, values, after = moved
+                    cost = cost_of(base.with_params(values), x0)
+                before = after
+        return theta, values, x0, recovery, cost(theta)
+
     base = _element_base(nominal, aug)
-    cost = cost_of(base, nominal.x0)
     if aug.starts:  # around a start (a refit's screened values), the whole grid when it does not hold
         start = aug.starts[0]
-        theta = element_search(cost, specs, [start.get(f"{el.effect}.{s[0]}", s[1]) for s in specs], local=True)
+        first = [start.get(f"{el.effect}.{s[0]}", s[1]) for s in specs]
     else:
-        theta = element_search(cost, specs, [s[1] for s in specs])
-    neutral = el.neutral(rec.t, command(rec, where))
-    if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
-        theta = [float(v) for v in neutral]
-    values, x0, recovery = dict(nominal.values), nominal.x0, ""
-    if data.free or data.estimate_x0:  # refit the model through the element
-        from phs.workflows.diagnose.retry import RECOVERABLE, reason
-
-        before, stepped = cost(theta), False
-        for _ in range(ELEMENT_ROUNDS if joint else 1):
-            start = (list(theta), dict(values))
-            try:
-                fit = identify(base.with_params(values), _transformed(rec, el, where, theta), data.free,
-                               bounds=data.bounds or None, x0=dict(zip(base.state_names, map(float, x0), strict=True)),
-                               outputs=outs, log_scale=data.log_scale or None, rtol=rtol,
-                               max_iter=max_iter or (30 if joint else SCREEN_ITER), ftol=ftol,
-                               compile=None if joint else False, estimate_x0=data.estimate_x0, weights=_fixed(data.weights))
-            except RECOVERABLE as exc:
-                if not recovery:
-                    recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the values before it"
-                break
-            cost = cost_of(base.with_params(fit.values), fit.x0)
-            refitted = cost(theta)
-            if not refitted <= before:  # a refit that ends worse is not taken
-                break
-            values, x0 = fit.values, fit.x0
-            if not joint:
-                break
-            if before - refitted <= ELEMENT_TOL * before and not stepped:  # the model hardly moved: neither will the element
-                break
-            theta = element_search(cost, specs, theta, local=True)
-            after = cost(theta)
-            if before - after <= ELEMENT_TOL * before:
-                break
-            moved = extrapolate(cost_of(base, x0), specs, data.free, data.bounds, start, (theta, values), after, ELEMENT_TOL)
-            stepped = moved is not None  # the element was not searched at the stepped model: the next round does
-            if stepped:
-                theta, values, after = moved
-                cost = cost_of(base.with_params(values), x0)
-            before = after
+        first = None
+    theta, values, x0, recovery, c = alternate(first, dict(nominal.values), nominal.x0, el.neutral(rec.t, command(rec, where)))
+    again = _pressed(nominal.values, data, base) if joint else []
+    if again:  # the nominal fit pressed a parameter against its range: once more from the values the model was built with
+        given = {**nominal.values, **{k: data.given[k] for k in data.free}}
+        other = alternate(None, given, nominal.x0, None)
+        if other[4] < c:
+            theta, values, x0, recovery, c = other
+            recovery = (recovery + " " if recovery else "") + (
+                f"fitted from the model's own values of {', '.join(again)} (the nominal fit ended on a bound of their range)")
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
     h = score(f"{aug.effect}@{where}", base, values, x0, len(data.free) + len(specs), data,
               augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
     h.recovery = recovery
     return _never_worse(nominal, h, aug, data, t0)
+
+
+PRESSED = 1e-6
+"""A fitted value within this share of its range's width (of its logarithm's, for a positive range spanning
+decades) of an end lies on that bound (:func:`_pressed`)."""
+
+
+def _pressed(values: dict, data: Data, system) -> list[str]:
+    """The free parameters of ``system`` whose fitted ``values`` lie on a bound of the fit (``data.bounds``,
+    else their declared range) and whose value the model was built with (``data.given``) lies inside it: a nominal fit
+    pressed against a bound is absorbing something the model lacks (a loop's delay absorbed by a damping
+    at its lower end), and an input element's alternating fit from there stays in that corner.
+
+    Examples
+    --------
+    >>> rec = Recording.from_arrays(np.linspace(0, 1, 11), {"y": np.zeros(11)})
+    >>> d = Data(rec, rec, np.ones(11, bool), None, ["y"], ["b", "k"], {"b": (0.1, 10.0), "k": (1.0, 100.0)}, [], None,
+    ...          given={"b": 1.0, "k": 40.0})
+    >>> _pressed({"b": 0.1, "k": 39.9}, d, None), _pressed({"b": 0.5, "k": 39.9}, d, None)
+    (['b'], [])
+    """
+    out = []
+    for k in data.free:
+        if not data.given or k not in data.given or k not in values:
+            continue
+        lo, hi = (data.bounds or {}).get(k) or (system.param(k).range if system is not None else None) or (None, None)
+        if lo is None or hi is None or not lo < hi:
+            continue
+        v, g = float(values[k]), float(data.given[k])
+        f = (lambda x: math.log(x)) if lo > 0 and hi / lo >= 10**1.5 else (lambda x: x)
+        width = f(hi) - f(lo)
+        on = min(abs(f(v) - f(lo)), abs(f(hi) - f(v))) <= PRESSED * width if v > 0 or f is not math.log else False
+        if on and lo < g < hi and abs(f(g) - f(v)) > 10 * PRESSED * width:
+            out.append(k)
+    return out

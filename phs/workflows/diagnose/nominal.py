@@ -85,6 +85,7 @@ def fit_nominal(system, data, n_jobs: int = 1) -> tuple[Scored, Data]:
         else:
             fit = polished
     data = replace(data, weights=dict(fit.weights)) if data.weights is not None else data
+    data = replace(data, given={k: float(system.param(k).value) for k in data.free})
     h = score("nominal", system, fit.values, fit.x0, len(data.free), data, seconds=time.perf_counter() - t0,
               train_residuals=fit.residuals)
     h.starts = {"tried": len(tried), "agreed": agreed, "best": label}
