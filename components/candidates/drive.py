@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from components.candidates.elements import InputElement
+from phs.signals import Sampled
 
 
 class TimeDelay(InputElement):
@@ -35,6 +36,27 @@ class TimeDelay(InputElement):
 
     def transform(self, t, u, theta) -> np.ndarray:
         return np.interp(t - float(theta[0]), t, u)
+
+    def course(self, t, u, theta) -> tuple | None:
+        """The command's samples ``tau_d`` later, its first value held before them (exact for any delay,
+        not only whole samples), for a command that is piecewise linear with few kinks (steps, ramps,
+        waveform tables: :meth:`phs.signals.Sampled.kinks`), whose kinks a fractional delay moves between
+        the samples.  None for a command with a kink at nearly every sample (a sine or chirp sampled at the
+        recording's rate): the line through its delayed samples follows it, and a simulation interpolates
+        it by a spline through its own samples wherever it is smooth, which on knots moved off the grid
+        would change the input's derivative (the capacitive load's current) by more than the delay does.
+
+        Examples
+        --------
+        >>> times, values = TimeDelay().course(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 1.0]), [0.25])
+        >>> times.tolist(), values.tolist()
+        ([0.0, 0.25, 1.25, 2.25], [0.0, 0.0, 1.0, 1.0])
+        """
+        tau = float(theta[0])
+        t, u = np.asarray(t, float), np.asarray(u, float)
+        if not tau > 0 or Sampled(tuple(t), tuple(u)).kinks() is None:
+            return None
+        return np.concatenate([[t[0]], t + tau]), np.concatenate([[u[0]], u])
 
     def neutral(self, t, u) -> list[float]:
         return [0.0]

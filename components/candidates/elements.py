@@ -243,10 +243,27 @@ class InputElement(Candidate):
         input through unchanged, or None when unknown."""
         return None
 
+    def course(self, t, u, theta) -> tuple | None:
+        """The element's output in continuous time as ``(times, values)`` (linear between them) when it is
+        not the straight line through its values at the samples (:meth:`transform`), else None: a delay by
+        a fraction of a sample moves the command's kinks between the samples (on a command that steps, the
+        current of a capacitive load differs by most of its spread between the two)."""
+        return None
+
     def drive(self, t, signals, where: str, theta) -> dict:
         """The model inputs this element sets at ``where`` from the recorded ``signals`` (a mapping of
         name to samples): the transformed command of every input of the place."""
         return {n: self.transform(t, np.asarray(signals[n], float), theta) for n in input_members(where)}
+
+    def drive_between(self, t, signals, where: str, theta) -> dict:
+        """The courses between samples (:meth:`course`) of the inputs :meth:`drive` sets, where they are not
+        straight lines (:attr:`phs.workflows.recording.Recording.between`)."""
+        out = {}
+        for n in input_members(where):
+            c = self.course(t, np.asarray(signals[n], float), theta)
+            if c is not None:
+                out[n] = c
+        return out
 
     def augment(self, system, where, scales) -> Augmentation:
         self._check_where(system, where)
@@ -279,6 +296,10 @@ class InLoop(InputElement):
     def drive(self, t, signals, where, theta) -> dict:
         u = smoothed_command(signals[self.channel])
         return {deviation_input(self.channel, self.effect): self.inner.transform(t, u, theta) - u}
+
+    def drive_between(self, t, signals, where, theta) -> dict:
+        # the command is smoothed far below the sampling rate: straight lines between samples follow it
+        return {}
 
     def __repr__(self) -> str:
         return f"InLoop({self.inner!r}, {self.channel!r})"

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from phs.errors import InputDataError, UnitError
+from phs.signals import Sampled
 from phs.units import parse_unit
 from phs.workflows.inputs import _column, _names_and_units, _read_rows, check_time
 
@@ -96,6 +97,12 @@ class Recording:
     signals: dict
     source: str = "<arrays>"
     units: dict = field(default_factory=dict)
+    between: dict = field(default_factory=dict)
+    """Signals whose course between the samples is not the straight line through them, as their own
+    ``(times, values)`` (linear between those): an input element's output in continuous time, e.g. a
+    command delayed by a fraction of a sample, whose kinks lie between the recording's samples.  The
+    samples in ``signals`` stay what every residual and plot reads; a simulation reads the course
+    (:meth:`input_signal`)."""
 
     # -- construction ------------------------------------------------------------------
     @classmethod
@@ -247,12 +254,33 @@ class Recording:
     def __len__(self) -> int:
         return len(self.t)
 
+    def input_signal(self, name: str) -> Sampled:
+        """The signal ``name`` as a simulation reads it: a :class:`~phs.signals.Sampled` through its course
+        (:attr:`between`) or, by default, through its samples.
+
+        Examples
+        --------
+        >>> rec = Recording.from_arrays(np.array([0.0, 1.0, 2.0]), {"U": np.array([0.0, 0.0, 1.0])})
+        >>> float(rec.input_signal("U")(1.5))
+        0.5
+        >>> late = Recording(rec.t, rec.signals, between={"U": (np.array([0.0, 1.25, 2.25]), np.array([0.0, 0.0, 1.0]))})
+        >>> float(late.input_signal("U")(1.5)), float(late["U"][2])    # the course delayed by 0.25; the samples kept
+        (0.25, 1.0)
+        """
+        times, values = self.between[name] if name in self.between else (self.t, self[name])
+        return Sampled(tuple(np.asarray(times, float)), tuple(np.asarray(values, float)))
+
     def window(self, t0: float, t1: float) -> Recording:
-        """The samples with ``t0 <= t <= t1`` (times kept)."""
+        """The samples with ``t0 <= t <= t1`` (times kept), and the courses between samples over it."""
         sel = (self.t >= t0 - 1e-12) & (self.t <= t1 + 1e-12)
         if sel.sum() < 3:
             raise InputDataError(f"{self.source}: window [{t0}, {t1}] holds fewer than 3 samples")
-        return Recording(self.t[sel], {k: v[sel] for k, v in self.signals.items()}, self.source, self.units)
+        between = {}
+        for k, (times, values) in self.between.items():  # from the last point at or before t0 to the first at or after t1
+            a = max(int(np.searchsorted(times, t0, side="right")) - 1, 0)
+            b = min(int(np.searchsorted(times, t1, side="left")) + 1, len(times))
+            between[k] = (times[a:b], values[a:b])
+        return Recording(self.t[sel], {k: v[sel] for k, v in self.signals.items()}, self.source, self.units, between)
 
     def split(self, at: float) -> tuple[Recording, Recording]:
         """Train/validation split by time: ``[t0, at]`` and ``[at, t_end]``.

@@ -14,8 +14,9 @@ augmented model's structural checks (J skew, R positive semi-definite) and the f
 Acceptance rule of a hypothesis (documented in ``docs/workflows/diagnose.md``): its training BIC is at
 least :data:`MIN_BIC_GAIN` below the nominal model's, and its validation residual (sum over channels of
 RSS / variance) at least :data:`MIN_VALIDATION_GAIN` (relative) below the nominal model's.  Hypotheses
-whose validation residual is within :data:`SUFFICIENT_MARGIN` of the best accepted one count as equally
-good; among them the one with the fewest parameters wins (then BIC).
+whose validation residual is within :data:`SUFFICIENT_MARGIN` of the best accepted one, and whose training
+residual is within it of the best of those, count as equally good; among them the one with the fewest
+parameters wins (then BIC).
 
 The parts, each importing only those listed after it: :mod:`~phs.workflows.diagnose.run` (:func:`diagnose`),
 :mod:`~phs.workflows.diagnose.screening` (fitting the hypotheses of a round),

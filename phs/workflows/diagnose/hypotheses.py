@@ -11,7 +11,6 @@ import numpy as np
 
 from codegen import Simulator
 from phs.errors import PHSError
-from phs.signals import Sampled
 from phs.workflows.diagnose.element_search import element_search, extrapolate
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.identify.coordinates import CHANNEL_FLOOR
@@ -146,12 +145,19 @@ def _transformed(rec: Recording, element, where: str, theta) -> Recording:
     """``rec`` with the model inputs the input element (parameters ``theta``) sets at its place
     (:meth:`~components.candidates.elements.InputElement.drive`): the transformed command of every input
     of the place (one input, or several driven together), or, between a controller and the plant, the
-    element's deviation from the recorded command."""
+    element's deviation from the recorded command; with its course between the samples where the element
+    gives one (:meth:`~components.candidates.elements.InputElement.course`: a delay by a fraction of a
+    sample), which every simulation then reads (:attr:`~phs.workflows.recording.Recording.between`)."""
     if element is None:
         return rec
     sig = dict(rec.signals)
-    sig.update(element.drive(rec.t, sig, where, theta))
-    return Recording(rec.t, sig, rec.source, rec.units)
+    driven = element.drive(rec.t, sig, where, theta)
+    # an input the element sets follows its new course, or the line through its new samples (a course the
+    # recording had, from an element accepted before, no longer holds)
+    between = {k: v for k, v in rec.between.items() if k not in driven}
+    between.update(element.drive_between(rec.t, sig, where, theta))
+    sig.update(driven)
+    return Recording(rec.t, sig, rec.source, rec.units, between)
 
 
 def _element_base(nominal: Scored, aug):
@@ -171,7 +177,7 @@ def command(rec: Recording, where: str) -> np.ndarray:
 
 
 def _simulate(system, rec: Recording, x0, params=None, sim=None):
-    u = {n: Sampled(tuple(rec.t), tuple(rec[n])) for n in system.input_names}
+    u = {n: rec.input_signal(n) for n in system.input_names}
     sim = sim or Simulator(system, energy=False)
     return sim.run(rec.t, u=u, x0=x0, params=params)
 

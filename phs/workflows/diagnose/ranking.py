@@ -16,7 +16,8 @@ MIN_BIC_GAIN = 10.0
 MIN_VALIDATION_GAIN = 0.01
 """Relative decrease of the validation residual needed to accept a hypothesis."""
 SUFFICIENT_MARGIN = 0.03
-"""Hypotheses within this relative validation-residual margin of the best count as equally good."""
+"""Hypotheses within this relative margin of the best validation residual and of the best training residual
+count as equally good (:func:`_pick`)."""
 FAILED_FACTOR = 0.9
 """Each hypothesis whose fit failed (every retry included) multiplies the verdict's confidence by this:
 it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1."""
@@ -145,8 +146,13 @@ def _pick(nominal, hyps, data=None):
     acc = [h for h in hyps if _accepted(nominal, h)]
     if not acc:
         return None
+    # equally good: within the margin of the best on the validation recording and on the training one (on
+    # thousands of samples a parameter more does not buy a lower training residual by overfitting: a simpler
+    # hypothesis that leaves much more of it misses structure the validation recording excites less)
     best = min(h.validation_rss for h in acc)
     good = [h for h in acc if h.validation_rss <= best * (1 + SUFFICIENT_MARGIN) + 1e-300]
+    best_train = min(h.rss for h in good)
+    good = [h for h in good if h.rss <= best_train * (1 + SUFFICIENT_MARGIN) + 1e-300]
     pick = min(good, key=lambda h: (h.n_params, h.bic))
     if data is not None and pick.augmentation.effect == "hysteresis":
         share = presliding_share(nominal, pick, data)

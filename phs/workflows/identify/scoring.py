@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from codegen.simulator import Simulator
-from phs.signals import Sampled
 
 
 def nrmse_fit(y, yhat) -> float:
@@ -22,7 +21,7 @@ def nrmse_fit(y, yhat) -> float:
 
 
 def _simulate_outputs(system, recording, outputs, x0, params=None, simulator=None):
-    u = {n: Sampled(tuple(recording.t), tuple(recording[n])) for n in system.input_names}
+    u = {n: recording.input_signal(n) for n in system.input_names}
     sim = simulator if simulator is not None else Simulator(system, energy=False)
     res = sim.run(recording.t, u=u, x0=x0, params=params)
     return {ch: res[ch] for ch in outputs}
