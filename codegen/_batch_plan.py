@@ -68,7 +68,7 @@ def plan_shape(sim, t: np.ndarray, u) -> Shape:
     U = np.zeros((nt, nu))
     U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does
     runs, steps, cs, t_off, u_off, key = [], [], [], [], [], []
-    for r in output_runs(t, sigs, segs, lambda choice, times: sim._eval_inputs(sigs, slots, choice, times), U):
+    for r in output_runs(t, sigs, segs, lambda choice, times, ms: sim._eval_inputs(sigs, slots, choice, times, ms), U):
         F, layout = sim._integrator(r.n, slots, run_sampled(sampled, r.choice), r.max_step)
         c = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
         r.store(U_check, r.u)

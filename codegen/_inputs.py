@@ -15,6 +15,7 @@ from numbers import Real
 import numpy as np
 import sympy as sp
 
+from codegen._interpolants import _interpolant, digest
 from phs.errors import InputDataError
 from phs.params import TIME
 from phs.signals import Piecewise, Sampled, Signal, as_signal
@@ -243,10 +244,12 @@ def _on_line(lines: np.ndarray, tm: float) -> bool:
     return i >= 0 and tm <= lines[i, 1]
 
 
-def segment_inputs(sigs, slots, choice, times, cache: dict) -> np.ndarray:
+def segment_inputs(sigs, slots, choice, times, cache: dict, max_step: float = 1.0) -> np.ndarray:
     """Inputs at ``times`` inside one segment, from the segment's templates and constants.
 
-    ``cache`` keeps the templates' numpy functions by key across calls.
+    ``cache`` keeps the templates' numpy functions by key across calls.  A sampled input that enters a run
+    through its interpolant is evaluated through the one the run integrates it with
+    (:func:`interpolation`): between its samples a spline is not the straight line.
 
     Examples
     --------
@@ -260,7 +263,8 @@ def segment_inputs(sigs, slots, choice, times, cache: dict) -> np.ndarray:
     out = np.empty((len(times), len(sigs)))
     for j, sg in enumerate(sigs):
         if isinstance(sg, Sampled):  # the samples themselves (a piecewise-linear one too: the same values)
-            out[:, j] = sg(times)
+            spline = choice[j] is None and interpolation(sg, max_step) == "bspline"
+            out[:, j] = _spline_values(sg, times) if spline else sg(times)
             continue
         k, vals = choice[j]
         key, tmpl, nc = slots[j][k]
@@ -269,4 +273,34 @@ def segment_inputs(sigs, slots, choice, times, cache: dict) -> np.ndarray:
             f = sp.lambdify([TIME] + [sp.Symbol(f"_c{i}", real=True) for i in range(nc)], tmpl, "numpy")
             cache[key] = f
         out[:, j] = np.broadcast_to(np.asarray(f(times, *vals), dtype=float), times.shape)
+    return out
+
+
+def interpolation(sg, max_step: float) -> str:
+    """How a run of step bound ``max_step`` (in output intervals) interpolates the sampled input ``sg``
+    that enters it through its interpolant: a cubic B-spline where the step may span several intervals
+    (:func:`codegen._grid.step_windows`) and there are samples enough, else linearly.
+
+    Examples
+    --------
+    >>> sg = Sampled(tuple(np.arange(10.0)), tuple(np.sin(np.arange(10.0))))
+    >>> interpolation(sg, 4.0), interpolation(sg, 1.0)
+    ('bspline', 'linear')
+    """
+    return "bspline" if max_step > 1 and len(sg.arrays[0]) >= 8 else "linear"
+
+
+def _spline_values(sg, times) -> np.ndarray:
+    """The B-spline interpolant of the samples of ``sg`` at ``times`` (the integrator's own)."""
+    d = sg.__dict__.get("_digest")
+    if d is None:
+        d = digest(sg.arrays)
+        object.__setattr__(sg, "_digest", d)
+    f = _interpolant(*sg.arrays, "bspline", d)
+    times = np.asarray(times, float)
+    out = np.asarray(sg(times), dtype=float).reshape(-1)
+    grid = sg.arrays[0]
+    inside = (times > grid[0]) & (times < grid[-1])  # CasADi's B-spline is 0 on its last knot; the ends are samples
+    if inside.any():
+        out[inside] = np.asarray(f(times[inside].reshape(1, -1)), dtype=float).reshape(-1)
     return out

@@ -46,8 +46,9 @@ class OutputRun:
 def output_runs(t, sigs, segs, inputs, U):
     """The integrator calls covering the grid ``t`` segment by segment, as :class:`OutputRun` objects.
 
-    ``segs`` are the segments of :func:`codegen._inputs.plan_segments`, ``inputs(choice, times)``
-    evaluates a segment's inputs, and ``U`` (len(t), nu), preallocated, receives the inputs on the grid
+    ``segs`` are the segments of :func:`codegen._inputs.plan_segments`, ``inputs(choice, times, max_step)``
+    evaluates a segment's inputs (``max_step``: the step bound of the run, which says how a sampled input
+    is interpolated there), and ``U`` (len(t), nu), preallocated, receives the inputs on the grid
     as results store them (the first row before the first call).
 
     Examples
@@ -57,7 +58,7 @@ def output_runs(t, sigs, segs, inputs, U):
     >>> t, sigs = np.linspace(0.0, 1.0, 3), [step(1.0, at=0.25)]
     >>> segs, slots = plan_segments(sigs, t)
     >>> U = np.zeros((3, 1))
-    >>> runs = list(output_runs(t, sigs, segs, lambda c, tt: segment_inputs(sigs, slots, c, tt, {}), U))
+    >>> runs = list(output_runs(t, sigs, segs, lambda c, tt, ms: segment_inputs(sigs, slots, c, tt, {}, ms), U))
     >>> [(r.start, r.n, r.on.tolist()) for r in runs]   # the edge at 0.25 is an output step off the grid
     [(0.0, 1, [False]), (0.25, 1, [True]), (0.5, 1, [True])]
     >>> U[:, 0]
@@ -67,7 +68,7 @@ def output_runs(t, sigs, segs, inputs, U):
     h = float(np.min(np.diff(t)))
     for k, (a, b, choice) in enumerate(segs):
         if k == 0:
-            U[0] = inputs(choice, t[:1])[0]
+            U[0] = inputs(choice, t[:1], 1.0)[0]
         # a breakpoint within rounding of a grid point is that grid point, so that the segments on either
         # side agree on who owns it: the one ending there (its output), the one starting there (its input)
         a, ia = snap_to_grid(t, a, h)
@@ -75,7 +76,7 @@ def output_runs(t, sigs, segs, inputs, U):
         if b <= a:  # an input feature shorter than the rounding of the grid: nothing to integrate
             continue
         if ia is not None:  # inputs are right-continuous: a grid point on a breakpoint sees the new segment's input
-            U[ia] = inputs(choice, np.array([a]))[0]
+            U[ia] = inputs(choice, np.array([a]), 1.0)[0]
         lo = ia + 1 if ia is not None else int(np.searchsorted(t, a, side="right"))
         hi = ib if ib is not None else int(np.searchsorted(t, b, side="left"))
         # the output steps: grid points strictly inside (a, b), then b (a grid point or not)
@@ -88,7 +89,7 @@ def output_runs(t, sigs, segs, inputs, U):
         edges = tuple(0 <= i < len(segs) and any(segs[i][2][j] is not None for j in interp) for i in (k - 1, k + 1))
         for ra, rh, rn, ms in bounded_runs(equal_runs(pts), [sigs[j] for j in interp], edges):
             times = ra + rh * np.arange(1, rn + 1)
-            uu = inputs(choice, times)
+            uu = inputs(choice, times, ms)
             j = idx[pos:pos + rn]
             pos += rn
             on = j >= 0

@@ -21,11 +21,11 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 
 import numpy as np
 
 from codegen._inputs import baked, plan_segments, segment_inputs
+from codegen._interpolants import digest
 from codegen._output import output_runs
 from phs.signals import Sampled
 
@@ -34,20 +34,6 @@ _PLANS: dict = {}
 _PLANS_KEPT = 8
 _TEMPLATES: dict = {}
 """The input templates' numpy functions by key (:func:`codegen._inputs.segment_inputs`)."""
-
-
-def digest(arrays) -> str:
-    """A digest of float arrays (the key of what is computed from their values).
-
-    Examples
-    --------
-    >>> digest([np.zeros(3)]) == digest([np.zeros(3)]) != digest([np.ones(3)])
-    True
-    """
-    h = hashlib.sha1()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
-    return h.hexdigest()
 
 
 @dataclasses.dataclass
@@ -95,7 +81,7 @@ def plan_for(t, sigs) -> Plan:
     segs, slots = plan_segments(sigs, t)
     sampled = [(*baked(sg), digest(baked(sg))) if baked(sg) is not None else None for sg in sigs]
     U = np.zeros((len(t), len(sigs)))
-    runs = list(output_runs(t, sigs, segs, lambda choice, times: segment_inputs(sigs, slots, choice, times, _TEMPLATES), U))
+    runs = list(output_runs(t, sigs, segs, lambda choice, times, ms: segment_inputs(sigs, slots, choice, times, _TEMPLATES, ms), U))
     plan = Plan(list(sigs), segs, slots, sampled, runs, U)
     if key is not None:
         while len(_PLANS) >= _PLANS_KEPT:

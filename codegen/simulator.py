@@ -37,8 +37,9 @@ import sympy as sp
 from codegen._domain import DomainCheck, fmt_state
 from codegen._grid import sampled_pieces, step_windows, time_grid
 from codegen._inputs import initial_state, input_signals, run_sampled, segment_inputs
+from codegen._interpolants import _digest, _interpolant
 from codegen._output import call_into_numpy, energy_accounts, energy_columns
-from codegen._plan import digest, plan_for
+from codegen._plan import plan_for
 from codegen.discrete_gradient import discrete_gradient_simulate
 from codegen.functions import _model_hash, generate
 from codegen.results import SimulationResult
@@ -85,39 +86,6 @@ def simulator(system, rtol: float = 1e-8, atol: float | None = None, max_steps: 
     (11,)
     """
     return Simulator(system, rtol=rtol, atol=atol, max_steps=max_steps, compile=compile, energy=energy)
-
-
-def _digest(g) -> str:
-    """A digest of sampled times and values ``g`` (the key of the integrators that interpolate them)."""
-    return digest(g[:2])
-
-
-_INTERPOLANTS: dict = {}
-"""Interpolants of sampled inputs by (samples' digest, kind), shared by every simulator of the process: a
-diagnosis simulates the same recording through many models (a B-spline through 20 000 samples takes
-~15 ms to build).  Bounded by :data:`_INTERPOLANTS_KEPT` (the oldest dropped first)."""
-_INTERPOLANTS_KEPT = 64
-
-
-def _interpolant(grid, values, kind: str, digest: str):
-    """The CasADi interpolant of ``kind`` through the samples ``(grid, values)`` with digest ``digest``,
-    built once per process (:data:`_INTERPOLANTS`).
-
-    Examples
-    --------
-    >>> g = np.arange(4.0); v = np.array([0.0, 1.0, 0.0, 2.0])
-    >>> f = _interpolant(g, v, "linear", _digest((g, v)))
-    >>> float(f(2.5)), _interpolant(g, v, "linear", _digest((g, v))) is f
-    (1.0, True)
-    """
-    key = (digest, kind)
-    hit = _INTERPOLANTS.get(key)
-    if hit is None:
-        hit = ca.interpolant(f"u_{kind}_{digest[:16]}", kind, [np.asarray(grid, dtype=float)], np.asarray(values, dtype=float))
-        if len(_INTERPOLANTS) >= _INTERPOLANTS_KEPT:
-            _INTERPOLANTS.pop(next(iter(_INTERPOLANTS)))
-        _INTERPOLANTS[key] = hit
-    return hit
 
 
 NEGLIGIBLE = 1e-100
@@ -208,7 +176,7 @@ class Simulator:
                 grid, values = sampled[j][:2]
                 # in a smooth window a cubic spline through the same samples: without a kink at every
                 # sample CVODES steps across samples (5-15 times fewer steps on sines sampled at 1 kHz)
-                kind = "bspline" if max_step > 1 and len(grid) >= 8 else "linear"
+                kind = "bspline" if max_step > 1 and len(grid) >= 8 else "linear"  # codegen._inputs.interpolation
                 interp = _interpolant(grid, values, kind, digests[j])
                 uexpr.append(interp(tt))
                 layout.append(("sampled", 0))
@@ -357,9 +325,10 @@ class Simulator:
                 parts.append(vals if k == active else [0.0] * nc)
         return np.concatenate([np.asarray(v, dtype=float).reshape(-1) for v in parts])
 
-    def _eval_inputs(self, sigs, slots, choice, times) -> np.ndarray:
-        """Inputs at ``times`` inside one segment, from the segment's templates and constants."""
-        return segment_inputs(sigs, slots, choice, times, self._templates)
+    def _eval_inputs(self, sigs, slots, choice, times, max_step: float = 1.0) -> np.ndarray:
+        """Inputs at ``times`` inside one segment, from the segment's templates and constants (a sampled
+        input through the interpolant a run of step bound ``max_step`` integrates it with)."""
+        return segment_inputs(sigs, slots, choice, times, self._templates, max_step)
 
     def _check_domain(self, xs, times, p, uu) -> None:
         self._domain(xs, times, p, uu)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import numpy as np
 
 from components.candidates.elements import InputElement
-from phs.signals import Sampled
 
 
 class TimeDelay(InputElement):
@@ -39,12 +38,7 @@ class TimeDelay(InputElement):
 
     def course(self, t, u, theta) -> tuple | None:
         """The command's samples ``tau_d`` later, its first value held before them (exact for any delay,
-        not only whole samples), for a command that is piecewise linear with few kinks (steps, ramps,
-        waveform tables: :meth:`phs.signals.Sampled.kinks`), whose kinks a fractional delay moves between
-        the samples.  None for a command with a kink at nearly every sample (a sine or chirp sampled at the
-        recording's rate): the line through its delayed samples follows it, and a simulation interpolates
-        it by a spline through its own samples wherever it is smooth, which on knots moved off the grid
-        would change the input's derivative (the capacitive load's current) by more than the delay does.
+        not only whole samples: the kinks of a stepping command move between the samples).
 
         Examples
         --------
@@ -53,9 +47,9 @@ class TimeDelay(InputElement):
         ([0.0, 0.25, 1.25, 2.25], [0.0, 0.0, 1.0, 1.0])
         """
         tau = float(theta[0])
-        t, u = np.asarray(t, float), np.asarray(u, float)
-        if not tau > 0 or Sampled(tuple(t), tuple(u)).kinks() is None:
+        if not tau > 0:
             return None
+        t, u = np.asarray(t, float), np.asarray(u, float)
         return np.concatenate([[t[0]], t + tau]), np.concatenate([[u[0]], u])
 
     def neutral(self, t, u) -> list[float]:

@@ -162,7 +162,7 @@ def test_output_steps_cover_every_grid_point_once(freq, dt, t_end, duty):
     sigs = [square(1.0, freq, duty=duty)]
     segs, _ = plan_segments(sigs, t)
     U = np.zeros((len(t), 1))
-    check_covered(list(output_runs(t, sigs, segs, lambda c, tt: np.zeros((len(tt), 1)), U)), len(t), "plan")
+    check_covered(list(output_runs(t, sigs, segs, lambda c, tt, ms: np.zeros((len(tt), 1)), U)), len(t), "plan")
 
 
 def test_failed_runs_carry_the_simulators_errors_and_do_not_affect_others(electromechanical, msd):

@@ -82,7 +82,7 @@ def test_identification_integrates_the_inputs_as_the_simulator_does():
     s = Sampled(tuple(T), tuple(u))
     segs, slots = plan_segments([s], T)
     sim_bound = np.full(len(T) - 1, -1.0)
-    for r in output_runs(T, [s], segs, lambda c, tt: np.asarray(s(tt))[:, None], np.zeros((len(T), 1))):
+    for r in output_runs(T, [s], segs, lambda c, tt, ms: np.asarray(s(tt))[:, None], np.zeros((len(T), 1))):
         i0 = int(round(r.start / 1e-3))
         sim_bound[i0: i0 + r.n] = 0.0 if r.choice[0] is not None else r.max_step
     fit_bound = np.full(len(T) - 1, -1.0)

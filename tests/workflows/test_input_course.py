@@ -60,13 +60,3 @@ def test_an_element_setting_an_input_again_drops_its_old_course():
     assert "U" not in s.between and np.max(s["U"]) < np.max(r["U"])
     assert np.array_equal(s.input_signal("U")(s.t), s["U"])
 
-
-def test_a_command_with_a_kink_at_every_sample_keeps_its_samples():
-    # a chirp sampled at the recording's rate is interpolated by a spline through its own samples where it is
-    # smooth; on knots moved off the grid by 0.8 of a sample that spline's slope, which the capacitive load's
-    # current follows, differs by several times the current's spread: the line through the delayed samples is kept
-    rec, _ = generate("time_delay", seconds=3, seed=3, validation=True)
-    assert TimeDelay().course(rec.t, rec["U"], [1.8e-3]) is None
-    assert "U" not in _transformed(rec, TimeDelay(), "U", [1.8e-3]).between
-    train, _ = generate("time_delay", seconds=3, seed=3)  # waveform tables: few kinks, a course
-    assert TimeDelay().course(train.t, train["U"], [1.8e-3]) is not None
