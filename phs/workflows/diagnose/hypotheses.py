@@ -541,7 +541,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     theta, values, x0, recovery, c = alternate(first, dict(nominal.values), nominal.x0, el.neutral(rec.t, command(rec, where)))
     again = _pressed(nominal.values, data, base) if joint else []
     if again:  # the nominal fit pressed a parameter against its range: once more from the values the model was built with
-        given = {**nominal.values, **{k: data.given[k] for k in data.free}}
+        given = {**nominal.values, **{k: data.given[k] for k in data.free if k in data.given}}  # a later round frees accepted effects' too
         other = alternate(None, given, nominal.x0, None)
         if other[4] < c:
             theta, values, x0, recovery, c = other

@@ -22,17 +22,17 @@ FAILED_FACTOR = 0.9
 """Each hypothesis whose fit failed (every retry included) multiplies the verdict's confidence by this:
 it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1."""
 CALIBRATION: dict = {
-    "effect": ((0.401, 0.682), (0.611, 0.895)),
-    "none": ((0.976, 0.429),),
+    "effect": ((0.401, 0.75), (0.561, 0.865), (0.969, 0.944)),
+    "none": ((0.63, 0.5),),
 }
 """Knots ``(raw score, share of right verdicts)`` of the confidence's calibration, for verdicts naming an
 effect (``"effect"``) and for ``"none"``: isotonic regression of rightness on the raw score over the
 concealed cases (``bench/calibrate_confidence.py``: 80 diagnoses of the electrostatic actuator's
 concealed effects at 0.35, 0.6 and 1 times their tuned strength, two noise seeds, 3 s recordings, kept
 in ``bench/calibration_data.jsonl``, collected with the screening, refit and deferral rules of
-``phs.workflows.diagnose.screening``).  On that set a verdict naming an effect was right 64 times in 75;
-the raw score says a little (right 11 of 14 below 0.55, 53 of 61 above); a ``none`` was right 2 times in
-5 (a weak delay and a weak series resistance went undetected), so ``none`` means "nothing the library can
+``phs.workflows.diagnose.screening``).  On that set a verdict naming an effect was right 68 times in 76;
+the raw score says a little (right 8 of 10 below 0.55, 60 of 66 above); a ``none`` was right 2 times in
+4 (two weak series resistances went undetected), so ``none`` means "nothing the library can
 detect in this recording", not "no missing physics".  The shares depend on the mix of cases a calibration
 set holds: they hold for effects of the library's kind, at these strengths.  Verdicts that explain less
 than half of the mismatch and leave structure are scaled further (:data:`PARTIAL_BELOW`)."""
