@@ -15,7 +15,7 @@ from numbers import Real
 import numpy as np
 import sympy as sp
 
-from codegen._interpolants import _interpolant, digest
+from codegen._interpolants import _interpolant, interpolation, sampled_digest
 from phs.errors import InputDataError
 from phs.params import TIME
 from phs.signals import Piecewise, Sampled, Signal, as_signal
@@ -249,7 +249,7 @@ def segment_inputs(sigs, slots, choice, times, cache: dict, max_step: float = 1.
 
     ``cache`` keeps the templates' numpy functions by key across calls.  A sampled input that enters a run
     through its interpolant is evaluated through the one the run integrates it with
-    (:func:`interpolation`): between its samples a spline is not the straight line.
+    (:func:`codegen._interpolants.interpolation`): between its samples a spline is not the straight line.
 
     Examples
     --------
@@ -263,7 +263,7 @@ def segment_inputs(sigs, slots, choice, times, cache: dict, max_step: float = 1.
     out = np.empty((len(times), len(sigs)))
     for j, sg in enumerate(sigs):
         if isinstance(sg, Sampled):  # the samples themselves (a piecewise-linear one too: the same values)
-            spline = choice[j] is None and interpolation(sg, max_step) == "bspline"
+            spline = choice[j] is None and interpolation(len(sg.arrays[0]), max_step) == "bspline"
             out[:, j] = _spline_values(sg, times) if spline else sg(times)
             continue
         k, vals = choice[j]
@@ -276,27 +276,10 @@ def segment_inputs(sigs, slots, choice, times, cache: dict, max_step: float = 1.
     return out
 
 
-def interpolation(sg, max_step: float) -> str:
-    """How a run of step bound ``max_step`` (in output intervals) interpolates the sampled input ``sg``
-    that enters it through its interpolant: a cubic B-spline where the step may span several intervals
-    (:func:`codegen._grid.step_windows`) and there are samples enough, else linearly.
-
-    Examples
-    --------
-    >>> sg = Sampled(tuple(np.arange(10.0)), tuple(np.sin(np.arange(10.0))))
-    >>> interpolation(sg, 4.0), interpolation(sg, 1.0)
-    ('bspline', 'linear')
-    """
-    return "bspline" if max_step > 1 and len(sg.arrays[0]) >= 8 else "linear"
-
 
 def _spline_values(sg, times) -> np.ndarray:
     """The B-spline interpolant of the samples of ``sg`` at ``times`` (the integrator's own)."""
-    d = sg.__dict__.get("_digest")
-    if d is None:
-        d = digest(sg.arrays)
-        object.__setattr__(sg, "_digest", d)
-    f = _interpolant(*sg.arrays, "bspline", d)
+    f = _interpolant(*sg.arrays, "bspline", sampled_digest(sg))
     times = np.asarray(times, float)
     out = np.asarray(sg(times), dtype=float).reshape(-1)
     grid = sg.arrays[0]

@@ -30,6 +30,36 @@ def digest(arrays) -> str:
     return h.hexdigest()
 
 
+def sampled_digest(sg) -> str:
+    """The digest of a sampled signal's times and values, computed once and kept on the signal.
+
+    Examples
+    --------
+    >>> from phs.signals import Sampled
+    >>> sg = Sampled((0.0, 1.0), (0.0, 2.0))
+    >>> sampled_digest(sg) == digest(sg.arrays)
+    True
+    """
+    d = sg.__dict__.get("_digest")
+    if d is None:
+        d = digest(sg.arrays)
+        object.__setattr__(sg, "_digest", d)
+    return d
+
+
+def interpolation(n_samples: int, max_step: float) -> str:
+    """How a run of step bound ``max_step`` (in output intervals) interpolates a sampled input of
+    ``n_samples`` samples that enters it through its interpolant: a cubic B-spline where the step may span
+    several intervals (:func:`codegen._grid.step_windows`) and there are samples enough, else linearly.
+
+    Examples
+    --------
+    >>> interpolation(10, 4.0), interpolation(10, 1.0), interpolation(5, 4.0)
+    ('bspline', 'linear', 'linear')
+    """
+    return "bspline" if max_step > 1 and n_samples >= 8 else "linear"
+
+
 def _digest(g) -> str:
     """A digest of sampled times and values ``g`` (the key of the integrators that interpolate them)."""
     return digest(g[:2])

@@ -25,7 +25,7 @@ import dataclasses
 import numpy as np
 
 from codegen._inputs import baked, plan_segments, segment_inputs
-from codegen._interpolants import digest
+from codegen._interpolants import digest, sampled_digest
 from codegen._output import output_runs
 from phs.signals import Sampled
 
@@ -56,10 +56,7 @@ def _key(t, sigs):
     parts = [digest([t])]
     for sg in sigs:
         if isinstance(sg, Sampled):
-            d = sg.__dict__.get("_digest")
-            if d is None:
-                d = digest(sg.arrays)
-                object.__setattr__(sg, "_digest", d)
+            d = sampled_digest(sg)
             # with how it enters (its kinks as breakpoints, its interpolant, its straight stretches)
             parts.append(("sampled", sg.hold, d, sg.kinks() is None, sg.lines().shape))
             continue

@@ -37,7 +37,7 @@ import sympy as sp
 from codegen._domain import DomainCheck, fmt_state
 from codegen._grid import sampled_pieces, step_windows, time_grid
 from codegen._inputs import initial_state, input_signals, run_sampled, segment_inputs
-from codegen._interpolants import _digest, _interpolant
+from codegen._interpolants import _digest, _interpolant, interpolation
 from codegen._output import call_into_numpy, energy_accounts, energy_columns
 from codegen._plan import plan_for
 from codegen.discrete_gradient import discrete_gradient_simulate
@@ -176,7 +176,7 @@ class Simulator:
                 grid, values = sampled[j][:2]
                 # in a smooth window a cubic spline through the same samples: without a kink at every
                 # sample CVODES steps across samples (5-15 times fewer steps on sines sampled at 1 kHz)
-                kind = "bspline" if max_step > 1 and len(grid) >= 8 else "linear"  # codegen._inputs.interpolation
+                kind = interpolation(len(grid), max_step)
                 interp = _interpolant(grid, values, kind, digests[j])
                 uexpr.append(interp(tt))
                 layout.append(("sampled", 0))

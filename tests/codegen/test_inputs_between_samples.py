@@ -41,7 +41,7 @@ def test_the_check_fails_when_outputs_read_the_straight_line(monkeypatch):
     t = np.arange(0.0, 1.0005, 1e-3)
     d = 1.8e-3
     times, values = np.concatenate([[0.0], t + d]), np.concatenate([[_chirp(0.0)], _chirp(t)])
-    monkeypatch.setattr(inputs, "interpolation", lambda sg, max_step: "linear")  # outputs read the line
+    monkeypatch.setattr(inputs, "interpolation", lambda n, max_step: "linear")  # outputs read the line
     import codegen._plan as plan
 
     plan._PLANS.clear()
