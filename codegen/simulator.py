@@ -38,6 +38,7 @@ from codegen._domain import DomainCheck, fmt_state
 from codegen._grid import sampled_pieces, step_windows, time_grid
 from codegen._inputs import initial_state, input_signals, run_sampled, segment_inputs
 from codegen._interpolants import _digest, _interpolant, interpolation
+from codegen._layout import ParamLayout
 from codegen._output import call_into_numpy, energy_accounts, energy_columns
 from codegen._plan import plan_for
 from codegen.discrete_gradient import discrete_gradient_simulate
@@ -179,7 +180,7 @@ class Simulator:
                 kind = interpolation(len(grid), max_step)
                 interp = _interpolant(grid, values, kind, digests[j])
                 uexpr.append(interp(tt))
-                layout.append(("sampled", 0))
+                layout.append(("sampled", ()))
                 continue
             terms = []
             lay = []
@@ -191,7 +192,7 @@ class Simulator:
                 extra += [w, cs]
                 lay.append(nc)
             uexpr.append(sum(terms) if terms else ca.SX(0))
-            layout.append(("slots", lay))
+            layout.append(("slots", tuple(lay)))
         uu = ca.vertcat(*uexpr) if nu else ca.SX(0, 1)
         x = z * self.scale
         subs_in = [sx["x"], sx["u"], sx["p"]]
@@ -215,6 +216,10 @@ class Simulator:
             opts["max_step_size"] = float(max_step)
         opts.update(self.integrator_options)
         F = ca.integrator(f"{self.f.rhs.name()}_cvodes{n}", "cvodes", dae, 0.0, np.arange(1.0, n + 1.0), opts)
+        layout = ParamLayout(npar, tuple(layout))
+        if F.nnz_in(2) != layout.size * (1 + int(self.integrator_options.get("nfwd", 0))):
+            raise SimulationError(f"simulation of {self.system.name!r}: integrator built with {F.nnz_in(2)} parameters "
+                                  f"where its layout declares {layout.size}")
         self._integrators[key] = (F, layout)
         return F, layout
 
@@ -316,14 +321,19 @@ class Simulator:
 
     def _pvec(self, p, a, h, layout, choice):
         parts = [p, [a, h]]
-        for j, lay in enumerate(layout):
+        for j, lay in enumerate(layout.inputs):
             if lay[0] == "sampled":  # baked into the integrator
                 continue
             active, vals = choice[j]
             for k, nc in enumerate(lay[1]):
                 parts.append([1.0 if k == active else 0.0])
                 parts.append(vals if k == active else [0.0] * nc)
-        return np.concatenate([np.asarray(v, dtype=float).reshape(-1) for v in parts])
+        P = np.concatenate([np.asarray(v, dtype=float).reshape(-1) for v in parts])
+        if len(p):
+            layout.check(P, f"simulation of {self.system.name!r}")
+        elif len(P) != layout.tail_size:
+            layout.check(np.concatenate([np.zeros(layout.n_model), P]), f"simulation of {self.system.name!r}")
+        return P
 
     def _eval_inputs(self, sigs, slots, choice, times, max_step: float = 1.0) -> np.ndarray:
         """Inputs at ``times`` inside one segment, from the segment's templates and constants (a sampled

@@ -9,6 +9,7 @@ Large fits run the dynamics, their derivatives and the output functions as compi
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 
@@ -16,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from codegen._inputs import LINEAR_SLOT
+from codegen._layout import ParamLayout
 from codegen.functions import _model_hash, generate
 from codegen.simulator import Simulator, sampled_pieces
 from phs.kinks import KINK_SHARE, linear_kinks
@@ -155,8 +157,8 @@ class _Problem:
             self.segments = []
             for i0, i1 in zip(cuts[:-1], cuts[1:]):
                 if nu and bound[i0] == 0:  # a line from sample i0 to i1
-                    F, _layout = sim._integrator(i1 - i0, slots, [None] * nu)
-                    Fs, _layout = sens._integrator(i1 - i0, slots, [None] * nu)
+                    F, layout = sim._integrator(i1 - i0, slots, [None] * nu)
+                    Fs, layout_s = sens._integrator(i1 - i0, slots, [None] * nu)
                     coef = []
                     for j in range(nu):
                         slope = (U[i1, j] - U[i0, j]) / (t[i1] - t[i0])
@@ -164,16 +166,15 @@ class _Problem:
                     tail = np.array([t[i0], dt] + coef)
                 else:
                     ms = float(np.min(bound[i0:i1]))
-                    F, _layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
-                    Fs, _layout = sens._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
+                    F, layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
+                    Fs, layout_s = sens._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
                     tail = np.array([t[i0], dt])
-                self.segments.append((i0, i1, F, Fs, tail))
+                self.segments.append(_Segment(i0, i1, F, Fs, tail, layout, layout_s))
             if outputs_lib is not None:
                 fy, fyj = outputs_lib.load()
         finally:
             if outputs_lib is not None:
                 outputs_lib.discard()  # after a failure: nothing left running or half-written
-        self.n_P = len(p0) + len(self.segments[0][4])
         self._fy, self._fyj = fy.map(N, "serial"), fyj.map(N, "serial")
         self.Ymeas = np.vstack([recording[ch] for ch in outputs])
         self.W = np.array([weights[ch] for ch in outputs], dtype=float)
@@ -219,8 +220,9 @@ class _Problem:
             Z[e0] = zc
             i1 = e0
             while i1 < e1:
-                i0, i1, F, _Fs, tail = next(seg)
-                zs = _integrate(F, zc, np.concatenate([p, tail]), self.nx, i1 - i0)
+                sg = next(seg)
+                i0, i1 = sg.i0, sg.i1
+                zs = _integrate(sg.F, zc, np.concatenate([p, sg.tail]), self.nx, i1 - i0)
                 Z[i0 + 1: i1 + 1] = zs
                 zc = zs[-1]
             ends.append(zc.copy())
@@ -265,7 +267,9 @@ class _Problem:
         r = self.res(z)
         p, dp = self._params(z)
         nx, nth, nd, N = self.nx, self.n_theta, self.n_dir, self.N
-        seed_p = np.zeros((nd, self.n_P))  # row d: the seed of direction d (C order = column-major (n_P, nd))
+        # row d: the seed of direction d in the model's parameters (the run's and the inputs' entries of a
+        # segment's parameter vector, which differ by segment kind, have none: see _Segment.seeds)
+        seed_p = np.zeros((nd, len(p)))
         seed_p[np.arange(nth), self.ifree] = dp
         Z = np.empty((N, nx))  # the state integrated with its sensitivities
         dZ = np.empty((N, nx, nd))  # d z_i / d (window directions)
@@ -282,8 +286,9 @@ class _Problem:
             Z[e0], dZ[e0] = zc, S
             i1 = e0
             while i1 < e1:
-                i0, i1, _F, Fs, tail = next(seg)
-                zs, dzs = _integrate_sensitivities(Fs, zc, S, np.concatenate([p, tail]), seed_p, i1 - i0)
+                sg = next(seg)
+                i0, i1 = sg.i0, sg.i1
+                zs, dzs = _integrate_sensitivities(sg.Fs, zc, S, np.concatenate([p, sg.tail]), sg.seeds(seed_p), i1 - i0)
                 Z[i0 + 1: i1 + 1], dZ[i0 + 1: i1 + 1] = zs, dzs
                 zc, S = zs[-1], dzs[-1]
             dends.append(S.copy())
@@ -324,6 +329,34 @@ class _Problem:
     def values(self, z, log_scaled, free):
         th = z[: self.n_theta]
         return {k: float(self.nominal[i] * (np.exp(th[i]) if k in log_scaled else th[i])) for i, k in enumerate(free)}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Segment:
+    """One CVODES call of a fit: samples ``i0..i1``, the plain and the sensitivity integrator, the part of
+    their parameter vector after the model's parameters (``tail``) and their layouts, checked against each
+    other where the segment is made: a line segment's vector carries its inputs' weights and constants, an
+    interpolated stretch's does not."""
+
+    i0: int
+    i1: int
+    F: object
+    Fs: object
+    tail: np.ndarray
+    layout: ParamLayout
+    layout_s: ParamLayout
+
+    def __post_init__(self):
+        where = f"fit segment of samples {self.i0}..{self.i1}"
+        self.layout.check(np.zeros(self.layout.n_model + len(self.tail)), where)
+        self.layout_s.check(np.zeros(self.layout_s.n_model + len(self.tail)), where)
+
+    def seeds(self, seed_p: np.ndarray) -> np.ndarray:
+        """The seeds ``(nd, size)`` of this segment's parameter vector from those of the model's parameters
+        ``seed_p`` ``(nd, n_model)`` (zero for the run's and the inputs' entries)."""
+        out = np.zeros((seed_p.shape[0], self.layout_s.size))
+        out[:, : seed_p.shape[1]] = seed_p
+        return out
 
 
 def _integrate(F, z0, P, nx: int, n: int) -> np.ndarray:
