@@ -10,15 +10,16 @@ inputs of a segment from its template and constants.
 
 from __future__ import annotations
 
+import warnings
 from numbers import Real
 
 import numpy as np
 import sympy as sp
 
 from codegen._interpolants import _interpolant, interpolation, sampled_digest
-from phs.errors import InputDataError
+from phs.errors import InputDataError, InputHoldWarning
 from phs.params import TIME
-from phs.signals import Piecewise, Sampled, Signal, as_signal
+from phs.signals import Constant, Piecewise, Sampled, Signal, as_signal
 
 
 def input_signals(system, u, t) -> list[Signal]:
@@ -59,22 +60,41 @@ def input_signals(system, u, t) -> list[Signal]:
             arr = np.asarray(spec, dtype=float)
             if arr.shape != t.shape:
                 raise InputDataError(f"input {name!r}: array of shape {arr.shape} does not match the time grid {t.shape}")
-            spec = Sampled(tuple(t), tuple(arr))
+            spec = Sampled(tuple(t), tuple(arr), hold="auto")
         elif callable(spec) and not isinstance(spec, Signal):
             try:
                 e = sp.sympify(spec(TIME))
                 spec = as_signal(e)
             except Exception:  # a numpy-only callable: sample it on the grid
-                spec = Sampled(tuple(t), tuple(np.asarray(spec(t), dtype=float)))
+                spec = Sampled(tuple(t), tuple(np.asarray(spec(t), dtype=float)), hold="auto")
+        if isinstance(spec, Sampled) and spec.held_ambiguous:
+            warnings.warn(f"input {name!r}: its samples change in isolated jumps between short flat stretches: read as "
+                          "held between samples (zero-order hold); pass Sampled(times, values, hold='linear') if they "
+                          "sample a continuous signal", InputHoldWarning, stacklevel=3)
         if isinstance(spec, Sampled) and spec.hold == "zoh":  # held samples jump: restart at each change
-            vals = np.asarray(spec.values, dtype=float)
-            tt = np.asarray(spec.times, dtype=float)
-            spec = Piecewise(tuple(tt[1:]), tuple(vals[1:]), float(vals[0])) if len(tt) > 1 else float(vals[0])
+            spec = held_signal(spec)
         try:
             out.append(as_signal(spec))
         except InputDataError as exc:
             raise InputDataError(f"input {name!r}: {exc}") from None
     return out
+
+
+def held_signal(sg: Sampled) -> Signal:
+    """The piecewise-constant signal of held samples ``sg`` (``hold="zoh"``): sample ``k``'s value from ``t[k]`` to
+    ``t[k+1]``, switching only where the value changes (those are the integrator's restarts).
+
+    Examples
+    --------
+    >>> sig = held_signal(Sampled((0.0, 1.0, 2.0, 3.0), (0.0, 0.0, 1.0, 1.0), hold="zoh"))
+    >>> sig.breakpoints(0.0, 3.0).tolist(), float(sig(1.5)), float(sig(2.0))
+    ([2.0], 0.0, 1.0)
+    """
+    tt, vals = sg.arrays
+    change = np.flatnonzero(np.diff(vals) != 0) + 1
+    if not len(change):
+        return Constant(float(vals[0]))
+    return Piecewise(tuple(tt[change].tolist()), tuple(vals[change].tolist()), float(vals[0]))
 
 
 def initial_state(system, x0) -> np.ndarray:
@@ -172,7 +192,7 @@ def baked(sg):
     return sg.arrays
 
 
-def plan_segments(sigs, t):
+def plan_segments(sigs, t, cuts=()):
     """Segments between the inputs' breakpoints on ``[t[0], t[-1]]`` and the input templates they use.
 
     A sampled input that is piecewise linear with few kinks (:meth:`phs.signals.Sampled.kinks`: a step,
@@ -181,6 +201,8 @@ def plan_segments(sigs, t):
     with many kinks enters through its interpolant, except over its long straight stretches
     (:meth:`phs.signals.Sampled.lines`: the holds and ramps between the sines of a recording), whose ends
     are breakpoints and over which it is the line again.
+
+    ``cuts``: further times at which a segment must end (the windows of a multiple-shooting fit).
 
     Returns ``(segs, slots)``: ``segs`` a list of ``(a, b, choice)`` with ``choice[j]`` the index of
     input ``j``'s template in ``slots[j]`` and its constants (None where a sampled input enters through
@@ -196,7 +218,8 @@ def plan_segments(sigs, t):
     t0, t1 = float(t[0]), float(t[-1])
     bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)}
                  | {float(b) for s in sigs if isinstance(s, Sampled) and baked(s) is None for b in s.kinks()}
-                 | {float(b) for s in sigs if isinstance(s, Sampled) for b in s.lines().reshape(-1)})
+                 | {float(b) for s in sigs if isinstance(s, Sampled) for b in s.lines().reshape(-1)}
+                 | {float(b) for b in cuts})
     edges = [t0] + [b for b in bps if t0 < b < t1] + [t1]
     slots: list[list] = [[] for _ in sigs]  # per input: list of (key, template, n_constants)
     for j, s in enumerate(sigs):

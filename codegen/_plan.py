@@ -68,14 +68,16 @@ def _key(t, sigs):
     return tuple(parts)
 
 
-def plan_for(t, sigs) -> Plan:
+def plan_for(t, sigs, cuts=()) -> Plan:
     """The :class:`Plan` of a simulation on the grid ``t`` with the input signals ``sigs`` (one per input),
-    computed once per grid and inputs."""
+    computed once per grid and inputs; ``cuts``: further times at which a run must end
+    (:func:`codegen._inputs.plan_segments`)."""
     key = _key(t, sigs)
+    key = key + (tuple(float(c) for c in cuts),) if key is not None else None
     hit = _PLANS.get(key) if key is not None else None
     if hit is not None:
         return hit
-    segs, slots = plan_segments(sigs, t)
+    segs, slots = plan_segments(sigs, t, cuts)
     sampled = [(*baked(sg), digest(baked(sg))) if baked(sg) is not None else None for sg in sigs]
     U = np.zeros((len(t), len(sigs)))
     runs = list(output_runs(t, sigs, segs, lambda choice, times, ms: segment_inputs(sigs, slots, choice, times, _TEMPLATES, ms), U))

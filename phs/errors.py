@@ -94,6 +94,18 @@ class ParameterRangeWarning(UserWarning):
     """
 
 
+class InputHoldWarning(UserWarning):
+    """A sampled input read as held between samples (zero-order hold) where that reading is ambiguous: its samples
+    change in isolated jumps, as a DAC's command does, but between short flat stretches, as a slowly varying signal
+    quantized by a converter does too (:func:`phs.kinks.held_between_samples`).  Declaring the reading silences it.
+
+    Examples
+    --------
+    >>> issubclass(InputHoldWarning, UserWarning)
+    True
+    """
+
+
 class UnitError(ModelError):
     """Declared units are inconsistent (an energy term that is not in joules).
 

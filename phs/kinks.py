@@ -62,3 +62,55 @@ def straight_stretches(kinks, n: int) -> list[tuple[int, int]]:
     """
     k = [0] + [int(i) for i in kinks] + [n - 1]
     return [(a, b) for a, b in zip(k[:-1], k[1:]) if b - a >= LINE_RUN]
+
+
+HELD_SHARE = 0.9
+"""Sampled values read as held between samples (:func:`held_between_samples`) when at least this share of their
+changes are isolated jumps between flat stretches.  A DAQ's command (steps, staircases, square waves, PRBS) changes at
+isolated samples only (share 1); a sensor's samples of a continuous signal change at consecutive samples wherever it
+moves (a sine, a ramp, a smooth edge: share near 0).  The margin below 1 keeps a held command whose value was updated
+at two consecutive samples here and there."""
+
+HELD_PLATEAU = 4
+"""Held values whose flat stretches are shorter than this many intervals (median) may as well be a continuous signal
+sampled coarsely or quantized by the converter: the reading is then said to be ambiguous."""
+
+
+def held_between_samples(values) -> tuple[bool, bool]:
+    """Whether sampled values look held between samples (a zero-order hold), and whether that reading is ambiguous.
+
+    Held: the values change (beyond rounding: 1e-12 of their largest magnitude) in isolated jumps between flat
+    stretches, at least :data:`HELD_SHARE` of the changing intervals having no changing neighbour.  Such samples
+    are a command held by a DAC: a continuous signal recorded by a sensor has no flat stretches where it moves.
+    Ambiguous: held, but with some changes at consecutive samples or with flat stretches shorter than
+    :data:`HELD_PLATEAU` intervals (median): a slow signal quantized by the converter looks the same.  Constant values
+    are not held (either reading gives the same signal).
+
+    Examples
+    --------
+    >>> held_between_samples([0.0] * 10 + [1.0] * 10 + [0.0] * 10)      # a pulse as a DAQ holds it
+    (True, False)
+    >>> held_between_samples(np.sin(np.arange(50) * 0.1))                              # a sampled sine
+    (False, False)
+    >>> held_between_samples(np.round(10 * np.sin(np.arange(200) * 0.05)))            # a quantized sine
+    (True, True)
+    """
+    v = np.asarray(values, dtype=float).reshape(-1)
+    if len(v) < 3:
+        return False, False
+    tol = 1e-12 * max(float(np.max(np.abs(v))), 1e-300)
+    ch = np.abs(np.diff(v)) > tol
+    n = int(ch.sum())
+    if n == 0:
+        return False, False
+    neighbour = np.zeros_like(ch)
+    neighbour[1:] |= ch[:-1]
+    neighbour[:-1] |= ch[1:]
+    isolated = int(np.sum(ch & ~neighbour))
+    if isolated < HELD_SHARE * n:
+        return False, False
+    edges = np.flatnonzero(ch)
+    flats = np.diff(np.concatenate([[-1], edges, [len(ch)]])) - 1  # flat intervals between consecutive changes
+    flats = flats[flats > 0]
+    ambiguous = isolated < n or (len(flats) > 0 and float(np.median(flats)) < HELD_PLATEAU)
+    return True, bool(ambiguous)

@@ -24,7 +24,7 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import InputDataError
-from phs.kinks import KINK_SHARE, LINE_RUN, linear_kinks, straight_stretches  # noqa: F401 - re-exported
+from phs.kinks import KINK_SHARE, LINE_RUN, held_between_samples, linear_kinks, straight_stretches  # noqa: F401 - re-exported
 from phs.params import TIME
 from phs.safe_parse import Arithmetic, Refusal, evaluate
 
@@ -361,15 +361,29 @@ def exponential_chirp(amplitude: float, f0: float, f1: float, duration: float, o
     return Expression(sp.Float(offset) + sp.Float(amplitude) * sp.sin(phase))
 
 
+HOLDS = ("linear", "zoh", "auto")
+"""How a sampled signal behaves between its samples (:class:`Sampled`)."""
+
+
 @dataclass(frozen=True)
 class Sampled(Signal):
     """Samples on a time grid, linearly interpolated (``hold="linear"``) or held (``"zoh"``).
+
+    ``hold`` says how the signal behaves between samples: ``"linear"``, a continuous signal sampled by a sensor
+    (interpolated: straight lines between its kinks, a cubic spline over its smooth stretches, see
+    :func:`codegen._grid.step_windows`); ``"zoh"``, a command held by a DAC (sample ``k``'s value from ``t[k]`` to
+    ``t[k+1]``); ``"auto"``, held when the samples look held (:func:`phs.kinks.held_between_samples`: isolated
+    jumps between flat stretches), else linear, resolved when the signal is made (``held_ambiguous`` then says
+    whether that reading was ambiguous).
 
     Examples
     --------
     >>> s = Sampled((0.0, 1.0, 2.0), (0.0, 2.0, 0.0))
     >>> float(s(0.5))
     1.0
+    >>> t = tuple(np.arange(30) * 0.1)
+    >>> Sampled(t, tuple([0.0] * 10 + [1.0] * 20), hold="auto").hold
+    'zoh'
     """
 
     times: tuple
@@ -387,8 +401,13 @@ class Sampled(Signal):
         if np.any(np.diff(tt) <= 0):
             i = int(np.argmax(np.diff(tt) <= 0)) + 1
             raise InputDataError(f"sampled signal: time is not strictly increasing at index {i} (t={tt[i]})")
-        if self.hold not in ("linear", "zoh"):
-            raise InputDataError(f"sampled signal: hold must be 'linear' or 'zoh', not {self.hold!r}")
+        if self.hold not in HOLDS:
+            raise InputDataError(f"sampled signal: hold must be one of {', '.join(map(repr, HOLDS))}, not {self.hold!r}")
+        ambiguous = False
+        if self.hold == "auto":
+            held, ambiguous = held_between_samples(vv)
+            object.__setattr__(self, "hold", "zoh" if held else "linear")
+        object.__setattr__(self, "held_ambiguous", ambiguous)
 
         # the samples as arrays, once (a recording's input is evaluated segment by segment)
         object.__setattr__(self, "_t", tt)

@@ -8,7 +8,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from codegen.simulator import simulate
-from phs.signals import Sampled
 from phs.workflows.identify.identifiability import analyse, combinations, rank_tolerance, unidentified
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
 from phs.workflows.identify.sensitivity_table import _sensitivity_table
@@ -213,8 +212,7 @@ class IdentificationResult:
         import matplotlib.pyplot as plt
 
         rec = recording if recording is not None else self._recording
-        res = simulate(self.fitted_system, rec.t, u={u: Sampled(tuple(rec.t), tuple(rec[u])) for u in
-                                                     self.system.input_names}, x0=self.x0)
+        res = simulate(self.fitted_system, rec.t, u={u: rec.input_signal(u) for u in self.system.input_names}, x0=self.x0)
         fig, axes = plt.subplots(len(self.outputs), 1, figsize=(8, 2.6 * len(self.outputs)), sharex=True, squeeze=False)
         for ax, ch in zip(axes[:, 0], self.outputs, strict=True):
             ax.plot(rec.t, rec[ch], lw=1, label="measured")

@@ -16,11 +16,12 @@ import shutil
 import casadi as ca
 import numpy as np
 
-from codegen._inputs import LINEAR_SLOT
+from codegen._inputs import input_signals, run_sampled
 from codegen._layout import ParamLayout
+from codegen._output import check_covered
+from codegen._plan import plan_for
 from codegen.functions import _model_hash, generate
-from codegen.simulator import Simulator, sampled_pieces
-from phs.kinks import KINK_SHARE, linear_kinks
+from codegen.simulator import Simulator
 from phs.workflows.identify.c_library import _Library
 
 # compile by default when the fit is large: samples x (1 + directions) x the dynamics' size above this
@@ -69,7 +70,7 @@ class _Problem:
         t = recording.t
         N = len(t)
         self.N = N
-        nx, nu = len(system.states), len(system.inputs)
+        nx = len(system.states)
         self.nx = nx
         pnames = system.param_names
         self.p0 = p0 = np.array(system.param_vector() if params is None else params, dtype=float)
@@ -80,9 +81,6 @@ class _Problem:
         self.ixi = [system.state_names.index(n) for n in estimate_x0]
         self.n_xi = len(estimate_x0)
         self.x0 = np.asarray(x0, dtype=float)
-        U = np.column_stack([recording[u] for u in system.input_names]) if nu else np.zeros((N, 0))
-        self.U = U
-        grids = [(t, U[:, j]) for j in range(nu)]
         # multiple shooting: K windows, each integrated from its own (scaled) initial state; the
         # continuity defects enter the least squares with a large weight (quadratic penalty)
         K = max(1, min(int(shooting), (N - 1) // 3))
@@ -92,18 +90,14 @@ class _Problem:
         # directions of the sensitivities in each window: theta, then the window's own start
         # (the estimated initial states in the first window, the whole start state in the others)
         self.n_dir = nd = self.n_theta + max(self.n_xi, nx if K > 1 else 0)
-        # a recorded input that is piecewise linear with few kinks (steps, staircases, square waves
-        # as sampled) is integrated piece by piece with restarts at its kinks, so CVODES takes long
-        # steps in between; otherwise it is interpolated and the step bounded by the sample interval
-        # (in windows whose step bound follows the input's smoothness: see ``step_windows``)
-        # (and over the long straight stretches of inputs with many kinks: holds and ramps between sines)
-        kinks = linear_kinks(U)
-        piecewise = nu > 0 and len(kinks) <= max(20, KINK_SHARE * (N - 1))  # the simulator's rule (Sampled.kinks)
-        pieces = sampled_pieces(U, kinks, piecewise) if nu > 0 else [(0, N - 1, 1)]
-        cuts = sorted(set(self.ms_edges) | {pc[0] for pc in pieces})
-        bound = np.ones(N)  # per sample interval: 0 on a line, else the step bound of its window
-        for w0, w1, m in pieces:
-            bound[w0:w1] = m
+        # the recording's inputs as a simulation reads them (held, interpolated, a declared law, a course between
+        # the samples: Recording.input_signal), cut into the simulator's own runs (codegen._plan): straight lines
+        # between the kinks of inputs with few kinks and over the long straight stretches of the others, an
+        # interpolant with a step bound elsewhere, a restart at every jump of a held input; the windows' edges
+        # are breakpoints too
+        sigs = input_signals(system, {n: recording.input_signal(n) for n in system.input_names}, t)
+        plan = plan_for(t, sigs, cuts=tuple(t[self.window_starts].tolist()))
+        self.U = plan.U
         gen = generate(system)
         scale = np.array([st.typical for st in system.states], dtype=float)  # the simulator's scaling
         # the fitted channels and their Jacobians at one sample (mapped over the recording below)
@@ -127,7 +121,7 @@ class _Problem:
         # compiled code: the dynamics with their Jacobian and forward derivative (which CVODES's
         # sensitivities call) in one library, the output functions in another (built by a second
         # compiler process meanwhile); both cached on disk
-        self.compiled = _decide_compile(compile, gen, N, nd, piecewise or nu == 0)
+        self.compiled = _decide_compile(compile, gen, N, nd, all(g is None for g in plan.sampled))
         cc = _c_compiler() if self.compiled else None
         mhash = _model_hash(system)
         key = f"{mhash}|identify|{nd}"
@@ -150,26 +144,18 @@ class _Problem:
             sens = Simulator(system, rtol=rtol, atol=atol, energy=False, compile=self.compiled, compiler=compiler,
                              integrator_options={**opts, "nfwd": nd})
             self.scale = sim.scale
-            slots = [[LINEAR_SLOT] for _ in range(nu)]
-            dt = t[1] - t[0]
-            # segments: (first sample, last sample, integrator, sensitivity integrator, the integrator
-            # parameters after p)
+            window_times = t[self.window_starts]
             self.segments = []
-            for i0, i1 in zip(cuts[:-1], cuts[1:]):
-                if nu and bound[i0] == 0:  # a line from sample i0 to i1
-                    F, layout = sim._integrator(i1 - i0, slots, [None] * nu)
-                    Fs, layout_s = sens._integrator(i1 - i0, slots, [None] * nu)
-                    coef = []
-                    for j in range(nu):
-                        slope = (U[i1, j] - U[i0, j]) / (t[i1] - t[i0])
-                        coef += [1.0, U[i0, j] - slope * t[i0], slope]
-                    tail = np.array([t[i0], dt] + coef)
-                else:
-                    ms = float(np.min(bound[i0:i1]))
-                    F, layout = sim._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
-                    Fs, layout_s = sens._integrator(i1 - i0, [[] for _ in range(nu)], grids, ms)
-                    tail = np.array([t[i0], dt])
-                self.segments.append(_Segment(i0, i1, F, Fs, tail, layout, layout_s))
+            for r in plan.runs:
+                sampled = run_sampled(plan.sampled, r.choice)
+                F, layout = sim._integrator(r.n, plan.slots, sampled, r.max_step)
+                Fs, layout_s = sens._integrator(r.n, plan.slots, sampled, r.max_step)
+                tail = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
+                # the window a run belongs to: the number of window starts at or before its start (grid points,
+                # so a run starting on one starts exactly there)
+                window = int(np.searchsorted(window_times, r.start + 1e-9 * r.step, side="right"))
+                self.segments.append(_Segment(r.j[r.on], r.on, window, F, Fs, tail, layout, layout_s))
+            check_covered(plan.runs, N, f"identification on {recording.source}")
             if outputs_lib is not None:
                 fy, fyj = outputs_lib.load()
         finally:
@@ -213,19 +199,19 @@ class _Problem:
         p, _ = self._params(z)
         Z = np.empty((self.N, self.nx))
         ends = []
-        seg = iter(self.segments)
-        for k in range(self.K):
-            e0, e1 = self.ms_edges[k], self.ms_edges[k + 1]
-            zc = self._window_start(z, k)
-            Z[e0] = zc
-            i1 = e0
-            while i1 < e1:
-                sg = next(seg)
-                i0, i1 = sg.i0, sg.i1
-                zs = _integrate(sg.F, zc, np.concatenate([p, sg.tail]), self.nx, i1 - i0)
-                Z[i0 + 1: i1 + 1] = zs
-                zc = zs[-1]
-            ends.append(zc.copy())
+        k = 0
+        zc = self._window_start(z, 0)
+        Z[0] = zc
+        for sg in self.segments:
+            if sg.window != k:  # a window's first run: the previous window ends, this one starts from its own state
+                ends.append(zc.copy())
+                k = sg.window
+                zc = self._window_start(z, k)
+                Z[self.ms_edges[k]] = zc
+            zs = _integrate(sg.F, zc, np.concatenate([p, sg.tail]), self.nx, len(sg.on))
+            Z[sg.rows] = zs[sg.on]
+            zc = zs[-1]
+        ends.append(zc.copy())
         self._last = (key, Z, ends)
         return Z, ends
 
@@ -274,24 +260,24 @@ class _Problem:
         Z = np.empty((N, nx))  # the state integrated with its sensitivities
         dZ = np.empty((N, nx, nd))  # d z_i / d (window directions)
         dends = []
-        seg = iter(self.segments)
-        for k in range(self.K):
-            e0, e1 = self.ms_edges[k], self.ms_edges[k + 1]
-            zc = self._window_start(z, k)
-            S = np.zeros((nx, nd))
-            if k == 0:
-                S[self.ixi, nth + np.arange(self.n_xi)] = 1.0
-            else:
-                S[:, nth: nth + nx] = np.eye(nx)
-            Z[e0], dZ[e0] = zc, S
-            i1 = e0
-            while i1 < e1:
-                sg = next(seg)
-                i0, i1 = sg.i0, sg.i1
-                zs, dzs = _integrate_sensitivities(sg.Fs, zc, S, np.concatenate([p, sg.tail]), sg.seeds(seed_p), i1 - i0)
-                Z[i0 + 1: i1 + 1], dZ[i0 + 1: i1 + 1] = zs, dzs
-                zc, S = zs[-1], dzs[-1]
-            dends.append(S.copy())
+        k, S, zc = -1, None, None
+        for sg in self.segments:
+            if sg.window != k:  # a window's first run: its own start state, seeded by its own directions
+                if k >= 0:
+                    dends.append(S.copy())
+                k = sg.window
+                zc = self._window_start(z, k)
+                S = np.zeros((nx, nd))
+                if k == 0:
+                    S[self.ixi, nth + np.arange(self.n_xi)] = 1.0
+                else:
+                    S[:, nth: nth + nx] = np.eye(nx)
+                e0 = self.ms_edges[k]
+                Z[e0], dZ[e0] = zc, S
+            zs, dzs = _integrate_sensitivities(sg.Fs, zc, S, np.concatenate([p, sg.tail]), sg.seeds(seed_p), len(sg.on))
+            Z[sg.rows], dZ[sg.rows] = zs[sg.on], dzs[sg.on]
+            zc, S = zs[-1], dzs[-1]
+        dends.append(S.copy())
         if not (np.all(np.isfinite(Z)) and np.all(np.isfinite(dZ))):
             raise RuntimeError("non-finite sensitivity")
         Cx, Cp = _map_call(self._fyj, [Z * self.scale, self.U, np.broadcast_to(p, (N, len(p)))],
@@ -333,13 +319,16 @@ class _Problem:
 
 @dataclasses.dataclass(frozen=True)
 class _Segment:
-    """One CVODES call of a fit: samples ``i0..i1``, the plain and the sensitivity integrator, the part of
-    their parameter vector after the model's parameters (``tail``) and their layouts, checked against each
-    other where the segment is made: a line segment's vector carries its inputs' weights and constants, an
+    """One CVODES call of a fit (a run of the simulator's plan, :class:`codegen._output.OutputRun`): the samples its
+    output steps land on (``rows``; ``on`` marks which output steps are samples: a breakpoint between samples is an
+    output step of its own), the multiple-shooting window it belongs to, the plain and the sensitivity integrator,
+    the part of their parameter vector after the model's parameters (``tail``) and their layouts, checked against
+    the tail where the segment is made: a line segment's vector carries its inputs' weights and constants, an
     interpolated stretch's does not."""
 
-    i0: int
-    i1: int
+    rows: np.ndarray
+    on: np.ndarray
+    window: int
     F: object
     Fs: object
     tail: np.ndarray
@@ -347,7 +336,7 @@ class _Segment:
     layout_s: ParamLayout
 
     def __post_init__(self):
-        where = f"fit segment of samples {self.i0}..{self.i1}"
+        where = f"fit segment ending at sample {int(self.rows[-1]) if len(self.rows) else '?'}"
         self.layout.check(np.zeros(self.layout.n_model + len(self.tail)), where)
         self.layout_s.check(np.zeros(self.layout_s.n_model + len(self.tail)), where)
 

@@ -91,14 +91,13 @@ class Study:
                 raise InputDataError(f"{name} must be a function of the run's variable values")
         recording = None
         if isinstance(u, Recording):
-            from phs.signals import Sampled
 
             recording = u
             missing = [n for n in system.input_names if n not in u.names]
             if missing:
                 raise InputDataError(f"recording {u.source!r} has no input {missing[0]!r} of {system.name!r}")
             t = u.t if t is None else t
-            u = {n: Sampled(tuple(recording.t), tuple(recording[n])) for n in system.input_names}
+            u = {n: recording.input_signal(n) for n in system.input_names}
         if isinstance(u, (list, tuple)):
             u = np.asarray(u, dtype=float)
         if t is None:
