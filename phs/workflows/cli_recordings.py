@@ -39,7 +39,7 @@ def parse_scales(items) -> dict:
     >>> parse_scales(["pos=mm:V"])
     Traceback (most recent call last):
     ...
-    phs.errors.InputDataError: --scale pos=mm:V: cannot convert 'mm' to 'V': different dimensions
+    phs.errors.InputDataError: --scale pos=mm:V: cannot convert 'mm' to 'V': different dimensions (m and kg*m**2/(s**3*A))
     """
     from phs.workflows.recording import unit_factor
 
@@ -106,8 +106,9 @@ def _read_recording(path: str, system, args, mapping: dict, scales: dict, output
 
 def model_and_recordings(args: argparse.Namespace) -> tuple[PHSystem, Recording, Recording | None, list[str], list[str], dict]:
     """Load the model and the recordings of a fitting subcommand (``fit``, ``diagnose``), checking every
-    name given on the command line first.  Returns ``(system, recording, validation or None, free,
-    fitted outputs, x0)``."""
+    name given on the command line first, with every signal in the model's units (a header ``U [kV]``
+    converted, ``--scale`` first).  Returns ``(system, recording, validation or None, free, fitted
+    outputs, x0)``."""
     params = parse_assignments(args.param, "--param", numeric=True)
     x0 = parse_assignments(args.x0, "--x0", numeric=True)
     mapping = parse_assignments(args.map, "--map")
@@ -137,10 +138,10 @@ def model_and_recordings(args: argparse.Namespace) -> tuple[PHSystem, Recording,
         if unknown:
             raise InputDataError(f"--x0: system {system.name!r} has no state {unknown[0]!r} "
                                  f"(states: {', '.join(system.state_names)})")
-    rec = _read_recording(args.data, system, args, mapping, scales, outputs)
+    rec = _read_recording(args.data, system, args, mapping, scales, outputs).in_units_of(system)
     _, fitted_outputs = rec.check_for(system, outputs or None)
     val = None
     if args.validate is not None:
-        val = _read_recording(args.validate, system, args, mapping, scales, fitted_outputs)
+        val = _read_recording(args.validate, system, args, mapping, scales, fitted_outputs).in_units_of(system)
         val.check_for(system, fitted_outputs)
     return system, rec, val, free, fitted_outputs, x0

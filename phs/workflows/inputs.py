@@ -17,6 +17,7 @@ import numpy as np
 
 from phs.errors import InputDataError
 from phs.signals import Sampled, Signal, parse_expression
+from phs.workflows.conversion import column_factor
 
 _HEADER_UNIT = re.compile(r"(.*\S)\s*\[([^\[\]]+)\]")
 _ASSIGN = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)\s*=(?!=)(.*)$", re.S)
@@ -84,8 +85,13 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     path : str or path-like
         CSV file: a header row of column names, then one row per sample.  A
         header cell ``name [unit]`` (as ``phs simulate --out`` writes them)
-        names the column ``name``; the unit must be the model's unit of that
-        input (``s`` for time), as values are not converted.
+        names the column ``name``, and its values are converted from ``unit``
+        to the model's unit of that input (``s`` for time; see
+        :func:`phs.workflows.conversion.unit_factor`).  A column without a unit
+        is taken as already in the model's unit.  Time stamps with jitter
+        (within :data:`JITTER` of a step of a uniform grid) are replaced by
+        that grid (:func:`uniform_grid`); otherwise the stamps are the
+        input's knots, as they are.
     system : PHSystem
         The model whose inputs are read.
     time_column : str
@@ -108,8 +114,8 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     ------
     InputDataError
         Naming the file, and the column and row where relevant: missing file,
-        missing time or input column, a column whose stated unit is not the
-        model's, a cell that is not a number, NaN or infinite values, time not
+        missing time or input column, a column whose stated unit cannot be
+        converted to the model's (naming both units), a cell that is not a number, NaN or infinite values, time not
         strictly increasing, fewer than 2 rows.
 
     Examples
@@ -124,10 +130,10 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     ([0.0, 1.0], 1.0)
     >>> with tempfile.TemporaryDirectory() as d:
     ...     path = os.path.join(d, "u.csv")
-    ...     _ = open(path, "w").write("t [s],U [V]\\n0,0\\n1,2\\n")
+    ...     _ = open(path, "w").write("t [ms],U [kV]\\n0,0\\n1000,2\\n")
     ...     t, u = read_input_csv(path, rc_circuit())
-    >>> float(u["U"](0.5))
-    1.0
+    >>> t.tolist(), float(u["U"](0.5))
+    ([0.0, 1.0], 1000.0)
     """
     path = os.fspath(path)
     inputs = system.input_names
@@ -153,16 +159,18 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
         c = missing[0]
         what = "time column" if c == time_column else f"column for input {_input_of(wanted, c)!r}"
         raise InputDataError(f"{path}: no {what} {c!r} (columns: {', '.join(header)})")
-    model_units = {time_column: "s", **{wanted[i.name]: i.unit for i in system.inputs if i.name in wanted}}
-    for c, unit in model_units.items():
-        if c in file_units and "".join(file_units[c].split()) != "".join(unit.split()):
-            raise InputDataError(f"{path}: column {c!r} is in {file_units[c]!r} but the model expects {unit!r}; "
-                                 f"write the values in {unit} or leave the unit out of the header")
+    model_units = {time_column: ("s", "time"), **{wanted[i.name]: (i.unit, i.name) for i in system.inputs
+                                                  if i.name in wanted}}
+    factor = {c: column_factor(path, c, file_units[c], unit, signal) for c, (unit, signal) in model_units.items()
+              if c in file_units}
     if len(rows) < 2:
         raise InputDataError(f"{path}: needs at least 2 data rows, found {len(rows)}")
-    t = _column(path, header, rows, time_column)
+    t = _column(path, header, rows, time_column) * factor.get(time_column, 1.0)
     check_time(t, path, 2, lambda k: f"row {rows[k][0]}", time_column)
-    signals = {u: Sampled(tuple(t), tuple(_column(path, header, rows, c))) for u, c in wanted.items()}
+    grid = uniform_grid(t)  # stamps with jitter: their uniform grid; irregular stamps are the input's knots
+    t = t if grid is None else grid
+    signals = {u: Sampled(tuple(t), tuple(_column(path, header, rows, c) * factor.get(c, 1.0)))
+               for u, c in wanted.items()}
     return t, signals
 
 
@@ -189,6 +197,92 @@ def check_time(t, source: str, min_samples: int, where, column: str = "t") -> No
         kind = "duplicated" if d[k - 1] == 0 else "decreasing"
         raise InputDataError(f"{source}: time column {column!r} is not strictly increasing at {where(k)} "
                              f"(t={t[k]:g} after t={t[k - 1]:g}: {kind} time)")
+
+
+JITTER = 0.01
+"""Largest distance, as a share of the step, of a time stamp from the least-squares uniform grid through the
+stamps for them to count as uniformly sampled (:func:`uniform_grid`).
+
+Why 1 %: a DAQ clock's jitter is far smaller (the EMPS recordings: 3e-5 of a step), while a real
+irregularity is far larger (a missing sample moves the stamps after it by a whole step from the grid
+through the others: 100 times the tolerance); and carrying a sample 1 % of a step away from its stamp
+changes its value by at most 1 % of the signal's change over one step, less than linear interpolation
+between samples, which every simulation of a recording already assumes, leaves out for any signal whose
+slope changes by more than 8 % within a step."""
+
+
+def uniform_grid(t: np.ndarray) -> np.ndarray | None:
+    """The uniform grid ``t[0] + k*dt`` carried instead of time stamps with jitter, or None if ``t`` is not uniform.
+
+    ``dt`` is the slope of the least-squares line through the stamps ``(k, t[k])``; the stamps count as
+    uniform when each lies within :data:`JITTER` (1 %) of a step from that line.  The grid keeps the
+    first stamp (time need not start at zero); stamps that already form a uniform grid to rounding
+    (within 1e-9 of a step) are returned as they are.
+
+    Parameters
+    ----------
+    t : array
+        Finite, strictly increasing time stamps (see :func:`check_time`).
+
+    Returns
+    -------
+    ndarray or None
+
+    Examples
+    --------
+    >>> grid = uniform_grid(np.array([10.0, 10.00100003, 10.00199998, 10.003]))     # jitter: 3e-5 of a step
+    >>> float(grid[0]), round(float(grid[1] - grid[0]), 6), bool(np.ptp(np.diff(grid)) < 1e-12)
+    (10.0, 0.001, True)
+    >>> uniform_grid(np.array([0.0, 0.001, 0.003, 0.004])) is None      # a missing sample
+    True
+    """
+    t = np.asarray(t, dtype=float)
+    n = t.size
+    if n < 3:
+        return t
+    k = np.arange(n, dtype=float)
+    s = t - t[0]  # from the first stamp: no cancellation when time starts far from zero
+    kc = k - k.mean()
+    dt = float(kc @ (s - s.mean()) / (kc @ kc))
+    off = s - dt * k
+    if not dt > 0 or np.max(np.abs(off - off.mean())) > JITTER * dt:  # the least-squares line misses a stamp by more
+        return None
+    if np.max(np.abs(off)) <= 1e-9 * dt:
+        return t
+    return t[0] + dt * k
+
+
+def check_uniform(t: np.ndarray, source: str, where, column: str = "t", advice: str = "") -> np.ndarray:
+    """The uniform grid of :func:`uniform_grid`, or an InputDataError naming where the sampling is irregular.
+
+    The row named is that of the step farthest from the median step (a missing sample, a burst), or, when
+    no step stands out (a clock drifting), the stamp farthest from the grid.  ``where(k)`` names sample ``k``
+    (``"row 5"``); ``advice`` ends the message.
+
+    Examples
+    --------
+    >>> check_uniform(np.array([0.0, 0.001, 0.002, 0.004, 0.005]), "r.csv", lambda k: f"row {k + 2}")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: r.csv: irregular sampling at row 5 of time column 't': step 0.002 s (t=0.004 after t=0.002) ...
+    """
+    grid = uniform_grid(t)
+    if grid is not None:
+        return grid
+    d = np.diff(t)
+    med = float(np.median(d))
+    dev = np.abs(d - med)
+    k = int(np.argmax(dev)) + 1
+    if dev[k - 1] > 2 * JITTER * med:
+        what = f"step {d[k - 1]:g} s (t={t[k]:g} after t={t[k - 1]:g}) where the others are {med:g} s"
+    else:  # every step is close to the median: the stamps drift away from a uniform grid
+        n = np.arange(t.size)
+        off = (t - t[0]) - n * (t[-1] - t[0]) / (t.size - 1)
+        k = int(np.argmax(np.abs(off)))
+        what = f"t={t[k]:g} lies {abs(off[k]) / med:.2g} steps off the uniform grid from t={t[0]:g} to t={t[-1]:g}"
+    tol = f"{100 * JITTER:g} %"
+    raise InputDataError(f"{source}: irregular sampling at {where(k)} of time column {column!r}: {what} "
+                         f"(time stamps may leave a uniform grid by at most {tol} of a step){advice}")
 
 
 def _input_of(wanted: dict, column: str) -> str:
@@ -331,8 +425,8 @@ def input_signals(system, specs: Iterable[str] | None, time_column: str = "t", m
         path = csv_files[0]
         t, read = read_input_csv(path, system, time_column, mapping, skip=signals)
         if span is not None:
-            tol = 1e-9 * max(abs(span[1] - span[0]), 1e-300)
-            if t[0] > span[0] + tol or t[-1] < span[1] - tol:
+            tol = 1e-9 * max(abs(span[1] - span[0]), 1e-300)  # and the jitter a uniform grid forgives at either end
+            if t[0] > span[0] + tol + JITTER * (t[1] - t[0]) or t[-1] < span[1] - tol - JITTER * (t[-1] - t[-2]):
                 raise InputDataError(f"{path}: column {time_column!r} covers t = {t[0]:g} .. {t[-1]:g} but the "
                                      f"simulation runs over {span[0]:g} .. {span[1]:g}")
         signals.update(read)

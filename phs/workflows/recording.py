@@ -8,67 +8,22 @@ file, the column and the row (spreadsheet numbering: the header is row 1).
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from phs.errors import InputDataError, UnitError
+from phs.errors import InputDataError
 from phs.signals import Sampled
-from phs.units import parse_unit
-from phs.workflows.inputs import _column, _names_and_units, _read_rows, check_time
-
-# SI multipliers of the unit names a recording may use (dimensions are checked separately)
-_PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "m": 1e-3, "u": 1e-6, "µ": 1e-6, "n": 1e-9, "c": 1e-2}
-_BASE_UNITS = ("m", "s", "V", "A", "N", "Ohm", "F", "C", "J", "W", "Pa", "rad", "g", "Hz")
+from phs.workflows.conversion import column_factor, model_units, unit_factor
+from phs.workflows.inputs import _column, _names_and_units, _read_rows, check_time, check_uniform
 
 
-def unit_factor(from_unit: str, to_unit: str) -> float:
-    """Factor converting values in ``from_unit`` to ``to_unit`` (e.g. ``mm`` -> ``m`` is 1e-3).
-
-    Raises
-    ------
-    InputDataError
-        If a unit is unknown or the dimensions differ.
-
-    Examples
-    --------
-    >>> unit_factor("mm", "m"), unit_factor("kV", "V"), unit_factor("deg", "rad") == np.pi / 180
-    (0.001, 1000.0, True)
-    """
-
-    def si(u: str) -> float:
-        u = u.strip()
-        if u in ("1", ""):
-            return 1.0
-        if u == "deg":
-            return np.pi / 180
-        if u == "g":
-            return 1e-3
-        if u in _BASE_UNITS:
-            return 1.0 if u != "g" else 1e-3
-        for p, f in _PREFIX.items():
-            if p and u.startswith(p) and u[len(p):] in _BASE_UNITS:
-                return f * (1e-3 if u[len(p):] == "g" else 1.0)
-        raise InputDataError(f"unknown unit {u!r}: use a prefix (k, m, u, n, c, M) and one of {', '.join(_BASE_UNITS)}")
-
-    fu = from_unit.replace("deg", "rad") if from_unit == "deg" else from_unit
-    try:
-        same = parse_unit(_strip_prefix(fu)) == parse_unit(_strip_prefix(to_unit))
-    except UnitError as exc:  # an unknown name, or text that is not a unit (read by phs.safe_parse)
-        raise InputDataError(f"cannot convert {from_unit!r} to {to_unit!r}: {exc}") from None
-    if not same:
-        raise InputDataError(f"cannot convert {from_unit!r} to {to_unit!r}: different dimensions")
-    return si(from_unit) / si(to_unit)
-
-
-def _strip_prefix(u: str) -> str:
-    u = u.strip()
-    if u in _BASE_UNITS or u in ("1", "", "deg"):
-        return "rad" if u == "deg" else (u or "1")
-    for p in _PREFIX:
-        if p and u.startswith(p) and u[len(p):] in _BASE_UNITS:
-            return u[len(p):]
-    return u
+def _unit_after_scale(column: str, scales: dict, file_units: dict) -> str | None:
+    """Unit of a column's values after its scale: a pair's target, none after a factor, else the header's."""
+    if column in scales:
+        sc = scales[column]
+        return str(sc[1]) if isinstance(sc, (tuple, list)) else None
+    return file_units.get(column)
 
 
 @dataclass(frozen=True)
@@ -80,11 +35,18 @@ class Recording:
     t : array
         Sample times [s].
     signals : dict of str -> array
-        Values of each named signal (SI units of the model).
+        Values of each named signal, in :attr:`units` (a signal without a unit is taken as in the
+        model's unit).
     source : str
         Where the data came from (file name), used in messages and reports.
     units : dict of str -> str
-        Unit of each signal after conversion.
+        Unit of each signal's values: read from the header ``name [unit]``, the target unit of a
+        ``scales=`` pair, or given by ``units=``; :meth:`in_units_of` converts them to a model's.
+    between : dict
+        See below.
+    columns : dict of str -> str
+        The column of the source each signal was read from, where its name differs (``mapping=``,
+        ``--map``), for messages.
 
     Examples
     --------
@@ -103,12 +65,36 @@ class Recording:
     command delayed by a fraction of a sample, whose kinks lie between the recording's samples.  The
     samples in ``signals`` stay what every residual and plot reads; a simulation reads the course
     (:meth:`input_signal`)."""
+    columns: dict = field(default_factory=dict)
 
     # -- construction ------------------------------------------------------------------
     @classmethod
     def from_arrays(cls, t, signals: dict, source: str = "<arrays>", units=None, min_samples: int = 3,
                     resample: float | None = None) -> Recording:
-        """Validate arrays and build a recording (see :meth:`from_csv` for the checks)."""
+        """Validate arrays and build a recording (see :meth:`from_csv` for the checks).
+
+        Parameters
+        ----------
+        t : array
+            Time stamps [s], finite and strictly increasing; uniform but for jitter (see :meth:`from_csv`).
+        signals : dict of str -> array
+            Values of each signal, one per time stamp.
+        source : str
+            Named in messages.
+        units : dict of str -> str, optional
+            Unit of each signal's values (converted to a model's by :meth:`in_units_of`).
+        min_samples : int
+            Fewest samples accepted.
+        resample : float, optional
+            Interpolate onto a uniform grid of this step.
+
+        Examples
+        --------
+        >>> t = 1234.5 + 0.001 * np.arange(5) + [0.0, 3e-8, -2e-8, 1e-8, 0.0]    # jitter: 3e-5 of a step
+        >>> rec = Recording.from_arrays(t, {"y": np.arange(5.0)})
+        >>> float(rec.t[0]), round(rec.dt, 6), bool(np.ptp(np.diff(rec.t)) < 1e-9 * rec.dt)
+        (1234.5, 0.001, True)
+        """
         t = np.asarray(t, dtype=float).reshape(-1)
         out = {}
         for name, v in signals.items():
@@ -122,7 +108,7 @@ class Recording:
             out[name] = v
         check_time(t, source, min_samples, lambda k: f"sample {k}")
         rec = cls(t, out, source, dict(units or {}))
-        return rec._resampled(resample) if resample else rec._checked_uniform()
+        return rec._resampled(resample) if resample else rec._checked_uniform(lambda k: f"sample {k}")
 
     @classmethod
     def from_csv(cls, path, time_column: str = "t", mapping: dict | None = None, scales: dict | None = None,
@@ -132,7 +118,15 @@ class Recording:
 
         A header cell ``name [unit]`` (as :meth:`codegen.results.SimulationResult.to_csv` writes
         them) names the column ``name``, and ``unit`` becomes the signal's unit unless the column
-        is scaled or ``units`` says otherwise.
+        is scaled or ``units`` says otherwise; :meth:`in_units_of` (called by ``identify`` and
+        ``diagnose``) converts it to the model's unit.  A time column's unit (``t [ms]``) is
+        converted to seconds here.
+
+        Time stamps need not start at zero.  Stamps with jitter count as uniform when each lies
+        within :data:`~phs.workflows.inputs.JITTER` (1 %) of a step from the least-squares uniform
+        grid through them; the recording then carries that grid ``t0 + k*dt`` from the first stamp
+        ``t0`` (:func:`~phs.workflows.inputs.uniform_grid`).  A missing sample, a repeated or
+        decreasing stamp is refused, naming the row.
 
         Parameters
         ----------
@@ -143,8 +137,10 @@ class Recording:
             ``{COLUMN: SIGNAL}``: renames columns to the model's signal names (default: same names).
         scales : dict of str -> float or (str, str)
             Per column: a factor, or ``(from_unit, to_unit)`` such as ``("mm", "m")``, ``("kV", "V")``.
+            A scale takes precedence over the header's unit: a factor leaves the column without a
+            unit (taken as in the model's), a pair gives it ``to_unit``.
         units : dict of str -> str
-            Unit of each signal after conversion (for reports).
+            Unit of each signal's values (after ``scales``), overriding the header.
         resample : float, optional
             Resample onto a uniform grid of this step (linear interpolation).  Without it an
             irregularly sampled file is an error.
@@ -157,7 +153,8 @@ class Recording:
         ------
         InputDataError
             Naming file, column and row: missing file or column, a non-numeric or empty cell,
-            NaN/inf, non-monotone or duplicated time, irregular sampling, too few rows.
+            NaN/inf, non-monotone or duplicated time, irregular sampling, too few rows, a time
+            column in a unit that is not a time.
 
         Examples
         --------
@@ -186,7 +183,10 @@ class Recording:
         if len(rows) < min_samples:
             raise InputDataError(f"{path}: needs at least {min_samples} data rows, found {len(rows)}")
         t = _column(path, header, rows, time_column)
-        check_time(t, path, min_samples, lambda k: f"row {rows[k][0]}", time_column)
+        if time_column in file_units:
+            t = t * column_factor(path, time_column, file_units[time_column], "s", "time")
+        where = lambda k: f"row {rows[k][0]}"  # noqa: E731
+        check_time(t, path, min_samples, where, time_column)
         scales = dict(scales or {})
         signals = {}
         for c in wanted:
@@ -198,44 +198,122 @@ class Recording:
         unknown_scales = [c for c in scales if c not in wanted]
         if unknown_scales:
             raise InputDataError(f"{path}: scales given for columns not read: {unknown_scales}")
-        read_units = {mapping.get(c, c): file_units[c] for c in wanted if c in file_units and c not in scales}
-        rec = cls(t, signals, path, {**read_units, **dict(units or {})})
-        return rec._resampled(resample) if resample else rec._checked_uniform()
+        read_units = {mapping.get(c, c): u for c in wanted if (u := _unit_after_scale(c, scales, file_units))}
+        columns_of = {mapping[c]: c for c in wanted if mapping.get(c, c) != c}
+        rec = cls(t, signals, path, {**read_units, **dict(units or {})}, columns=columns_of)
+        return rec._resampled(resample) if resample else rec._checked_uniform(where, time_column)
 
     @classmethod
     def from_dataframe(cls, df, time_column: str = "t", mapping=None, scales=None, **kw) -> Recording:
-        """Build from a pandas DataFrame (columns as in :meth:`from_csv`)."""
-        if time_column not in df.columns:
-            raise InputDataError(f"DataFrame: no time column {time_column!r} (columns: {', '.join(map(str, df.columns))})")
+        """Build from a pandas DataFrame (columns as in :meth:`from_csv`, ``name [unit]`` labels too;
+        other keywords as :meth:`from_arrays`).
+
+        Examples
+        --------
+        >>> import pytest; pd = pytest.importorskip("pandas")   # pandas is optional
+        >>> df = pd.DataFrame({"t [ms]": [0.0, 1.0, 2.0], "U [kV]": [0.0, 1.0, 2.0]})
+        >>> rec = Recording.from_dataframe(df)
+        >>> rec.t.tolist(), rec.units
+        ([0.0, 0.001, 0.002], {'U': 'kV'})
+        """
+        labels = list(df.columns)
+        names, file_units = _names_and_units([str(c) for c in labels], "DataFrame")
+        if time_column not in names:
+            raise InputDataError(f"DataFrame: no time column {time_column!r} (columns: {', '.join(names)})")
         mapping, scales = dict(mapping or {}), dict(scales or {})
-        sig = {}
-        for c in df.columns:
-            if c == time_column:
-                continue
+        sig, units, columns_of, t = {}, {}, {}, None
+        for label, c in zip(labels, names):
             try:
-                v = df[c].to_numpy(dtype=float)
+                v = df[label].to_numpy(dtype=float)
             except (TypeError, ValueError):
                 raise InputDataError(f"DataFrame: column {c!r} is not numeric") from None
+            if c == time_column:
+                t = v * (column_factor("DataFrame", c, file_units[c], "s", "time") if c in file_units else 1.0)
+                continue
             sc = scales.get(c, 1.0)
-            sig[mapping.get(c, c)] = v * float(unit_factor(*sc) if isinstance(sc, (tuple, list)) else sc)
-        return cls.from_arrays(df[time_column].to_numpy(dtype=float), sig, source="DataFrame", **kw)
+            name = mapping.get(c, c)
+            sig[name] = v * float(unit_factor(*sc) if isinstance(sc, (tuple, list)) else sc)
+            if unit := _unit_after_scale(c, scales, file_units):
+                units[name] = unit
+            if name != c:
+                columns_of[name] = c
+        kw["units"] = {**units, **dict(kw.get("units") or {})}
+        rec = cls.from_arrays(t, sig, source="DataFrame", **kw)
+        return replace(rec, columns=columns_of) if columns_of else rec
 
     # -- checks --------------------------------------------------------------------------
-    def _checked_uniform(self) -> Recording:
-        d = np.diff(self.t)
-        if d.size and (d.max() - d.min()) > 1e-6 * d.mean():
-            k = int(np.argmax(np.abs(d - np.median(d)))) + 1
-            raise InputDataError(
-                f"{self.source}: irregular sampling: step {d[k - 1]:g} s at t={self.t[k]:g} versus the median "
-                f"{np.median(d):g} s; pass resample=DT to interpolate onto a uniform grid"
-            )
-        return self
+    def _checked_uniform(self, where=lambda k: f"sample {k}", column: str = "t") -> Recording:
+        """This recording on the uniform grid of its time stamps (:func:`~phs.workflows.inputs.check_uniform`:
+        jitter within 1 % of a step), or an InputDataError naming ``where(k)`` the sampling is irregular."""
+        t = check_uniform(self.t, self.source, where, column, "; pass resample=DT to interpolate onto a uniform grid")
+        return self if t is self.t else replace(self, t=t)
 
     def _resampled(self, dt: float) -> Recording:
         if not dt > 0:
             raise InputDataError(f"{self.source}: resample step must be positive, got {dt}")
-        tt = np.arange(self.t[0], self.t[-1] + dt * 1e-9, dt)
-        return Recording(tt, {k: np.interp(tt, self.t, v) for k, v in self.signals.items()}, self.source, self.units)
+        tt = self.t[0] + dt * np.arange(int(np.floor((self.t[-1] - self.t[0]) / dt * (1 + 1e-12))) + 1)
+        return replace(self, t=tt, signals={k: np.interp(tt, self.t, v) for k, v in self.signals.items()})
+
+    # -- units ---------------------------------------------------------------------------
+    def in_units_of(self, system) -> Recording:
+        """This recording with every signal of ``system`` in the model's unit, or an InputDataError.
+
+        The model's unit of a signal is that of its input, port output, measured output or state
+        (:func:`model_units`).  A signal whose unit (:attr:`units`) differs is multiplied by
+        :func:`unit_factor` (``kV`` -> ``V``, ``mm`` -> ``m``, ``deg`` -> ``rad``), its course
+        (:attr:`between`) too; a signal without a unit is taken as already in the model's unit; a
+        signal the model does not name is left as it is.  A unit that cannot be converted (another
+        dimension, an unknown name) is refused in one line naming the source, the column and both
+        units.  So is a dimensionless unit (``1``, ``rad``, ``deg``) against a dimensioned model
+        unit: a header that states a unit is taken at its word, and a plain number where the model
+        expects metres is more likely a normalised or mislabelled column than metres; leave the unit
+        out of the header, or give a scale, to read the values as they are.
+        :func:`~phs.workflows.identify.identify` and :func:`~phs.workflows.diagnose.diagnose` call it
+        on entry (and ``phs fit``, ``phs diagnose``, ``phs sweep --data`` on reading).
+
+        Parameters
+        ----------
+        system : PHSystem
+
+        Returns
+        -------
+        Recording
+            ``self`` when every unit is already the model's.
+
+        Raises
+        ------
+        InputDataError
+            Naming the source, the column and both units.
+
+        Examples
+        --------
+        >>> from systems.examples import mass_spring_damper
+        >>> rec = Recording.from_arrays([0.0, 0.1, 0.2], {"F": [0.0, 1.0, 2.0], "position": [0.0, 5.0, 10.0]},
+        ...                             units={"F": "kN", "position": "mm"})
+        >>> si = rec.in_units_of(mass_spring_damper())
+        >>> si["F"].tolist(), si["position"].tolist(), si.units
+        ([0.0, 1000.0, 2000.0], [0.0, 0.005, 0.01], {'F': 'N', 'position': 'm'})
+        >>> Recording.from_arrays([0.0, 0.1, 0.2], {"position": [0.0, 1.0, 2.0]}, source="r.csv",
+        ...                       units={"position": "s"}).in_units_of(mass_spring_damper())  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        phs.errors.InputDataError: r.csv: column 'position' is in 's', which cannot be converted to 'm', the model's ...
+        """
+        model = model_units(system)
+        factors, units = {}, dict(self.units)
+        for name, unit in self.units.items():
+            if name not in model or name not in self.signals or "".join(unit.split()) == "".join(model[name].split()):
+                continue
+            f = column_factor(self.source, self.columns.get(name, name), unit, model[name], name)
+            if f != 1.0:
+                factors[name] = f
+            units[name] = model[name]
+        if units == self.units:
+            return self
+        signals = {k: v * factors[k] if k in factors else v for k, v in self.signals.items()}
+        between = {k: (tv[0], np.asarray(tv[1], float) * factors[k]) if k in factors else tv
+                   for k, tv in self.between.items()}
+        return replace(self, signals=signals, units=units, between=between)
 
     # -- access --------------------------------------------------------------------------
     @property

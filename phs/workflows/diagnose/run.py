@@ -103,6 +103,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         import os
 
         n_jobs = max(1, min(4, os.cpu_count() or 1))
+    recording = recording.in_units_of(system)  # units of the file's headers (kV, mm) to the model's
+    validation = validation.in_units_of(system) if validation is not None else None
     _, outs = recording.check_for(system, outputs)
     if free is None:
         free = [p.name for p in system.params if p.range is not None and p.value not in (None, 0)][:8]

@@ -31,7 +31,9 @@ def evaluate_fit(system, recording, outputs, x0=None, params=None, simulator=Non
     """NRMSE fit % per output channel of ``system`` simulated on ``recording``'s inputs.
 
     ``params`` overrides parameter values without building a new system; ``simulator`` reuses
-    a :class:`codegen.Simulator` of ``system`` (and its integrators) across calls.
+    a :class:`codegen.Simulator` of ``system`` (and its integrators) across calls.  The recording's
+    signals are taken in the model's units (:meth:`~phs.workflows.recording.Recording.in_units_of`).
     """
+    recording = recording.in_units_of(system)
     sim = _simulate_outputs(system, recording, outputs, x0, params, simulator)
     return {ch: nrmse_fit(recording[ch], sim[ch]) for ch in outputs}

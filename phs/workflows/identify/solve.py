@@ -46,7 +46,8 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     ----------
     system : PHSystem
     recording : phs.workflows.recording.Recording
-        Uniformly sampled; provides every input of the system and the fitted outputs.
+        Uniformly sampled; provides every input of the system and the fitted outputs.  Signals in other
+        units than the model's (a header ``U [kV]``) are converted (:meth:`~phs.workflows.recording.Recording.in_units_of`).
     free : sequence of str
         Parameters to fit.
     bounds : dict of str -> (lo, hi), optional
@@ -116,6 +117,8 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     >>> round(fit.values["R.R"])
     2000
     """
+    recording = recording.in_units_of(system)  # units of the file's headers (kV, mm) to the model's
+    validation = validation.in_units_of(system) if validation is not None else None
     if ml_start is not None and weights != "ml":
         raise ParameterError("identify: ml_start (the first fit's weights) needs weights='ml'")
     if isinstance(weights, str):

@@ -296,7 +296,7 @@ def run_sweep(args) -> int:
             raise InputDataError("--data gives the time grid and inputs: do not combine it with --t-end, --dt, --input")
         from phs.workflows.recording import Recording
 
-        recording = Recording.from_csv(args.data, time_column=args.time, mapping=mapping)
+        recording = Recording.from_csv(args.data, time_column=args.time, mapping=mapping).in_units_of(system)
         t = None
     else:
         if args.t_end is None:
