@@ -10,6 +10,7 @@ import casadi as ca
 import numpy as np
 
 from codegen.functions import generate
+from phs.errors import InputDataError
 from phs.io import write_atomic
 
 if TYPE_CHECKING:
@@ -235,14 +236,33 @@ class SimulationResult:
         data = np.column_stack([self.t] + [self[c] for c in cols])
         return ["t"] + cols, data
 
-    def to_csv(self, path) -> None:
+    def to_csv(self, path, between: dict | None = None) -> None:
         """Write every signal to CSV atomically (a temporary file renamed into place).
 
         The header names each column with its unit, ``t [s],C.Q [C],...``;
-        :meth:`phs.workflows.recording.Recording.from_csv` reads such headers by name.
+        :meth:`phs.workflows.recording.Recording.from_csv` reads such headers by name.  ``between`` maps an
+        input's name to how it behaved between the samples of this run, written after its unit in braces
+        (``U [V] {square(1500, 3)}``, ``F [N] {zoh}``: :mod:`phs.workflows.between`), so that a fit of the file
+        replays the run exactly; ``phs simulate --out`` writes it for every input.
+
+        Examples
+        --------
+        >>> import os, tempfile
+        >>> from systems.examples import rc_circuit
+        >>> from codegen import simulate
+        >>> res = simulate(rc_circuit(), np.linspace(0, 1e-3, 5), u={"U": 1.0})
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     res.to_csv(os.path.join(d, "r.csv"), between={"U": "1.0"})
+        ...     open(os.path.join(d, "r.csv")).readline().split(",")[:3]
+        ['t [s]', 'C.Q [C]', 'U [V] {1.0}']
         """
         header, data = self.table()
-        write_csv_atomic(path, [f"{name} [{self.unit(name)}]" for name in header], data)
+        notes = dict(between or {})
+        unknown = [k for k in notes if k not in self.system.input_names]
+        if unknown:
+            raise InputDataError(f"to_csv: between= names {unknown[0]!r}, which is not an input of {self.system.name!r}")
+        write_csv_atomic(path, [f"{name} [{self.unit(name)}]" + (f" {{{notes[name]}}}" if name in notes else "")
+                                for name in header], data)
 
     def to_pandas(self) -> pd.DataFrame:
         """Every signal as a pandas DataFrame indexed by time ``t``; units in ``df.attrs["units"]``.
@@ -380,6 +400,9 @@ def signal(system, name: str, *, x, u, y=None, measured=None, extra=None, known=
 
 def write_csv_atomic(path, header, data) -> None:
     """Write a CSV file so that either the whole file appears or nothing does (:func:`phs.io.write_atomic`)."""
+    import csv
+
     buf = io.StringIO()
-    np.savetxt(buf, data, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+    csv.writer(buf, lineterminator="\n").writerow(header)  # a cell with a comma (a law in braces) is quoted
+    np.savetxt(buf, data, delimiter=",", comments="", fmt="%.17g")
     write_atomic(path, buf.getvalue())

@@ -7,6 +7,7 @@ import math
 from typing import TYPE_CHECKING
 
 from phs.errors import InputDataError
+from phs.workflows.between import HOLD_WORDS
 from phs.workflows.cli_options import _name_list
 from phs.workflows.cli_vocabulary import add_option
 from phs.workflows.inputs import _names_and_units, parse_assignments
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
     """Options of the subcommands that fit a model to a recording (``fit``, ``diagnose``)."""
-    for name in ("--x0", "--scale", "--resample", "--outputs", "--validate"):
+    for name in ("--x0", "--scale", "--resample", "--outputs", "--validate", "--hold"):
         add_option(p, name)
 
 
@@ -97,9 +98,17 @@ def _read_recording(path: str, system, args, mapping: dict, scales: dict, output
             wanted = system.input_names + [signal_of[c] for c in signal_of if signal_of[c] in known]
         columns = list(dict.fromkeys(column_of.get(sig, sig) for sig in wanted))
         columns += [c for c in scales if c in header and c not in columns and c != args.time]
+    holds = {}
+    for column, reading in parse_assignments(getattr(args, "hold", None), "--hold").items():
+        if header is not None and column not in header:
+            raise InputDataError(f"--hold {column}={reading}: {path} has no column {column!r} (columns: {', '.join(header)})")
+        if reading.strip().lower() not in HOLD_WORDS:
+            raise InputDataError(f"--hold {column}={reading}: say zoh (held between samples) or linear (a continuous "
+                                 "signal); a law goes in the column's header, as phs simulate --out writes it")
+        holds[mapping.get(column, column)] = reading
     try:
         return Recording.from_csv(path, time_column=args.time, mapping=mapping, scales=scales,
-                                  resample=args.resample, columns=columns)
+                                  resample=args.resample, columns=columns, holds=holds)
     except InputDataError as exc:  # say it with the command line's option names
         raise InputDataError(str(exc).replace("pass resample=DT", "pass --resample DT")) from None
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from phs.errors import InputDataError
 from phs.signals import Sampled, Signal, parse_expression
+from phs.workflows.between import check_law, header_annotations, hold_of, split_annotation
 from phs.workflows.conversion import column_factor
 
 _HEADER_UNIT = re.compile(r"(.*\S)\s*\[([^\[\]]+)\]")
@@ -77,7 +78,7 @@ def parse_assignments(items: Iterable[str] | None, option: str = "--param", nume
 
 
 def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = None,
-                   skip: Iterable[str] = ()) -> tuple[np.ndarray, dict[str, Sampled]]:
+                   skip: Iterable[str] = ()) -> tuple[np.ndarray, dict[str, Signal]]:
     """Read the inputs of ``system`` from a CSV file with a header row.
 
     Parameters
@@ -107,8 +108,9 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     -------
     t : ndarray
         Times of the rows.
-    signals : dict of str -> Sampled
-        One linearly interpolated signal per input.
+    signals : dict of str -> Signal
+        One signal per input: its declared law, or its samples held or interpolated as the header's annotation
+        says (:mod:`phs.workflows.between`), else as they look (``hold="auto"``).
 
     Raises
     ------
@@ -152,8 +154,8 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     skip = set(skip)
     wanted = {u: column_of.get(u, u) for u in inputs if u not in skip}
 
-    header, rows = _read_rows(path)
-    header, file_units = _names_and_units(header, path)
+    raw_header, rows = _read_rows(path)
+    header, file_units = _names_and_units(raw_header, path)
     missing = [c for c in [time_column, *wanted.values()] if c not in header]
     if missing:
         c = missing[0]
@@ -169,8 +171,16 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     check_time(t, path, 2, lambda k: f"row {rows[k][0]}", time_column)
     grid = uniform_grid(t)  # stamps with jitter: their uniform grid; irregular stamps are the input's knots
     t = t if grid is None else grid
-    signals = {u: Sampled(tuple(t), tuple(_column(path, header, rows, c) * factor.get(c, 1.0)))
-               for u, c in wanted.items()}
+    notes = header_annotations(raw_header, header)
+    signals = {}
+    for u, c in wanted.items():  # as the header says the input behaves between samples, else as its samples look
+        v = _column(path, header, rows, c)
+        hold = hold_of(notes.get(c, "auto"), path, c)
+        if isinstance(hold, Signal):
+            check_law(hold, notes[c], t, v, path, c, lambda k: f"row {rows[k][0]}")
+            signals[u] = hold if factor.get(c, 1.0) == 1.0 else factor[c] * hold
+        else:
+            signals[u] = Sampled(tuple(t), tuple(v * factor.get(c, 1.0)), hold=hold)
     return t, signals
 
 
@@ -323,11 +333,12 @@ def _names_and_units(header: list[str], path: str) -> tuple[list[str], dict[str,
 
     Examples
     --------
-    >>> _names_and_units(["t [s]", "C.Q [C]", "volts"], "r.csv")
-    (['t', 'C.Q', 'volts'], {'t': 's', 'C.Q': 'C'})
+    >>> _names_and_units(["t [s]", "C.Q [C]", "volts", "U [kV] {zoh}"], "r.csv")
+    (['t', 'C.Q', 'volts', 'U'], {'t': 's', 'C.Q': 'C', 'U': 'kV'})
     """
     names, units = [], {}
     for cell in header:
+        cell = split_annotation(cell)[0]  # how the column behaves between samples: phs.workflows.between
         m = _HEADER_UNIT.fullmatch(cell)
         name = m.group(1).strip() if m else cell
         if m:
@@ -431,3 +442,30 @@ def input_signals(system, specs: Iterable[str] | None, time_column: str = "t", m
                                      f"simulation runs over {span[0]:g} .. {span[1]:g}")
         signals.update(read)
     return signals
+
+
+def between_notes(system, specs, signals: dict) -> dict:
+    """How each input of a run behaved between the samples, as ``phs simulate --out`` writes it in the header
+    (:mod:`phs.workflows.between`): the text of an input given as an expression (its law), ``zoh`` or ``linear``
+    for one read from samples; an input read as a law from a file, or not given, gets no note.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> specs = ["U=square(1.0, 50)"]
+    >>> between_notes(rc_circuit(), specs, input_signals(rc_circuit(), specs))
+    {'U': 'square(1.0, 50)'}
+    """
+    notes = {}
+    names = system.input_names
+    for spec in specs or ():
+        spec = str(spec).strip()
+        if spec.lower().endswith(".csv"):
+            continue
+        m = _ASSIGN.match(spec)
+        name, text = (m.group(1), m.group(2).strip()) if m else (names[0], spec)
+        notes[name] = text
+    for name, sig in signals.items():
+        if name not in notes and isinstance(sig, Sampled):
+            notes[name] = sig.hold
+    return notes

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from phs.errors import InputDataError
-from phs.signals import Sampled
+from phs.signals import Sampled, Signal
+from phs.workflows.between import check_law, header_annotations, hold_of
 from phs.workflows.conversion import column_factor, model_units, unit_factor
 from phs.workflows.inputs import _column, _names_and_units, _read_rows, check_time, check_uniform
 
@@ -66,11 +67,18 @@ class Recording:
     samples in ``signals`` stay what every residual and plot reads; a simulation reads the course
     (:meth:`input_signal`)."""
     columns: dict = field(default_factory=dict)
+    holds: dict = field(default_factory=dict)
+    """How each input behaves between its samples, where declared: ``"zoh"`` (held by a DAC from each sample to
+    the next), ``"linear"`` (a continuous signal sampled by a sensor) or a :class:`~phs.signals.Signal`, the law the
+    samples were taken from (a header annotation ``U [V] {square(1500, 3)}``, as ``phs simulate --out`` writes it:
+    the run replays exactly, edges between the samples included).  An input not declared is read by its samples
+    (:func:`phs.kinks.held_between_samples`): held when it changes in isolated jumps between flat stretches, else
+    continuous (:meth:`input_signal`)."""
 
     # -- construction ------------------------------------------------------------------
     @classmethod
     def from_arrays(cls, t, signals: dict, source: str = "<arrays>", units=None, min_samples: int = 3,
-                    resample: float | None = None) -> Recording:
+                    resample: float | None = None, holds: dict | None = None) -> Recording:
         """Validate arrays and build a recording (see :meth:`from_csv` for the checks).
 
         Parameters
@@ -108,12 +116,13 @@ class Recording:
             out[name] = v
         check_time(t, source, min_samples, lambda k: f"sample {k}")
         rec = cls(t, out, source, dict(units or {}))
-        return rec._resampled(resample) if resample else rec._checked_uniform(lambda k: f"sample {k}")
+        rec = rec._resampled(resample) if resample else rec._checked_uniform(lambda k: f"sample {k}")
+        return rec.with_holds(holds or {}, lambda k: f"sample {k}")
 
     @classmethod
     def from_csv(cls, path, time_column: str = "t", mapping: dict | None = None, scales: dict | None = None,
                  units: dict | None = None, resample: float | None = None, min_samples: int = 3,
-                 columns=None) -> Recording:
+                 columns=None, holds: dict | None = None) -> Recording:
         """Read a CSV file with a header row.
 
         A header cell ``name [unit]`` (as :meth:`codegen.results.SimulationResult.to_csv` writes
@@ -169,6 +178,7 @@ class Recording:
         """
         path = os.fspath(path)
         header, rows = _read_rows(path)
+        raw_header = header
         header, file_units = _names_and_units(header, path)
         if time_column not in header:
             raise InputDataError(f"{path}: no time column {time_column!r} (columns: {', '.join(header)})")
@@ -201,7 +211,10 @@ class Recording:
         read_units = {mapping.get(c, c): u for c in wanted if (u := _unit_after_scale(c, scales, file_units))}
         columns_of = {mapping[c]: c for c in wanted if mapping.get(c, c) != c}
         rec = cls(t, signals, path, {**read_units, **dict(units or {})}, columns=columns_of)
-        return rec._resampled(resample) if resample else rec._checked_uniform(where, time_column)
+        rec = rec._resampled(resample) if resample else rec._checked_uniform(where, time_column)
+        noted = {mapping.get(c, c): text for c, text in header_annotations(raw_header, header).items() if c in wanted}
+        factors = {mapping.get(c, c): float(unit_factor(*sc) if isinstance(sc, (tuple, list)) else sc) for c, sc in scales.items()}
+        return rec.with_holds({**noted, **dict(holds or {})}, where, factors)
 
     @classmethod
     def from_dataframe(cls, df, time_column: str = "t", mapping=None, scales=None, **kw) -> Recording:
@@ -313,7 +326,45 @@ class Recording:
         signals = {k: v * factors[k] if k in factors else v for k, v in self.signals.items()}
         between = {k: (tv[0], np.asarray(tv[1], float) * factors[k]) if k in factors else tv
                    for k, tv in self.between.items()}
-        return replace(self, signals=signals, units=units, between=between)
+        holds = {k: factors[k] * h if k in factors and isinstance(h, Signal) else h for k, h in self.holds.items()}
+        return replace(self, signals=signals, units=units, between=between, holds=holds)
+
+    def with_holds(self, holds: dict, row=None, factors=None) -> Recording:
+        """This recording with ``holds`` declaring how inputs behave between samples (:attr:`holds`): by signal
+        name, ``"zoh"``, ``"linear"``, ``"auto"`` or a law (a :class:`~phs.signals.Signal`, or its text in the
+        vocabulary of ``--input``, read by :func:`phs.workflows.between.hold_of`).  A law is checked against the
+        samples (:func:`phs.workflows.between.check_law`; ``row(k)`` names sample ``k`` in the message) and
+        multiplied by ``factors[name]`` where the values were scaled on reading.
+
+        Raises
+        ------
+        InputDataError
+            Naming the source and the signal: an unknown signal, a reading that is not one, samples that do not
+            follow their declared law.
+
+        Examples
+        --------
+        >>> t = np.arange(0.0, 1.0, 0.01)
+        >>> rec = Recording.from_arrays(t, {"U": np.where(t < 0.5, 0.0, 1.0)}).with_holds({"U": "step(1.0, 0.5)"})
+        >>> float(rec.input_signal("U")(0.499))
+        0.0
+        """
+        if not holds:
+            return self
+        row = row or (lambda k: f"sample {k}")
+        out = dict(self.holds)
+        for name, text in holds.items():
+            if name not in self.signals:
+                raise InputDataError(f"{self.source}: a reading between samples is given for {name!r}, which is not a "
+                                     f"signal of the recording (signals: {', '.join(self.signals)})")
+            column = self.columns.get(name, name)
+            hold = hold_of(text, self.source, column)
+            if isinstance(hold, Signal):
+                f = (factors or {}).get(name, 1.0)
+                check_law(hold, str(text), self.t, self.signals[name] / f, self.source, column, row)
+                hold = hold if f == 1.0 else f * hold
+            out[name] = hold
+        return replace(self, holds=out)
 
     # -- access --------------------------------------------------------------------------
     @property
@@ -332,21 +383,31 @@ class Recording:
     def __len__(self) -> int:
         return len(self.t)
 
-    def input_signal(self, name: str) -> Sampled:
-        """The signal ``name`` as a simulation reads it: a :class:`~phs.signals.Sampled` through its course
-        (:attr:`between`) or, by default, through its samples.
+    def input_signal(self, name: str) -> Signal:
+        """The signal ``name`` as a simulation reads it: its course between the samples (:attr:`between`), its
+        declared law, or its samples (:class:`~phs.signals.Sampled`) held or interpolated as declared in
+        :attr:`holds` or, undeclared, as they look (``hold="auto"``: held when they change in isolated jumps between
+        flat stretches, as a DAC's command does).
 
         Examples
         --------
-        >>> rec = Recording.from_arrays(np.array([0.0, 1.0, 2.0]), {"U": np.array([0.0, 0.0, 1.0])})
+        >>> rec = Recording.from_arrays(np.array([0.0, 1.0, 2.0, 3.0]), {"U": np.array([0.0, 0.5, 1.0, 0.0])})
         >>> float(rec.input_signal("U")(1.5))
-        0.5
+        0.75
         >>> late = Recording(rec.t, rec.signals, between={"U": (np.array([0.0, 1.25, 2.25]), np.array([0.0, 0.0, 1.0]))})
         >>> float(late.input_signal("U")(1.5)), float(late["U"][2])    # the course delayed by 0.25; the samples kept
         (0.25, 1.0)
+        >>> steps = Recording.from_arrays(np.arange(40) * 0.1, {"U": np.repeat([0.0, 1.0], 20)})
+        >>> steps.input_signal("U").hold, float(steps.input_signal("U")(1.95))   # held: the step at t = 2.0 exactly
+        ('zoh', 0.0)
         """
-        times, values = self.between[name] if name in self.between else (self.t, self[name])
-        return Sampled(tuple(np.asarray(times, float)), tuple(np.asarray(values, float)))
+        if name in self.between:
+            times, values = self.between[name]
+            return Sampled(tuple(np.asarray(times, float)), tuple(np.asarray(values, float)))
+        hold = self.holds.get(name, "auto")
+        if isinstance(hold, Signal):
+            return hold
+        return Sampled(tuple(self.t), tuple(self[name]), hold=hold)
 
     def window(self, t0: float, t1: float) -> Recording:
         """The samples with ``t0 <= t <= t1`` (times kept), and the courses between samples over it."""
@@ -358,7 +419,7 @@ class Recording:
             a = max(int(np.searchsorted(times, t0, side="right")) - 1, 0)
             b = min(int(np.searchsorted(times, t1, side="left")) + 1, len(times))
             between[k] = (times[a:b], values[a:b])
-        return Recording(self.t[sel], {k: v[sel] for k, v in self.signals.items()}, self.source, self.units, between)
+        return replace(self, t=self.t[sel], signals={k: v[sel] for k, v in self.signals.items()}, between=between)
 
     def split(self, at: float) -> tuple[Recording, Recording]:
         """Train/validation split by time: ``[t0, at]`` and ``[at, t_end]``.

@@ -20,7 +20,7 @@ from phs.errors import InputDataError
 from phs.io import write_atomic
 from phs.workflows.cli_options import _check_writable, _time_grid
 from phs.workflows.cli_vocabulary import _add_model_options, add_option
-from phs.workflows.inputs import input_signals, parse_assignments
+from phs.workflows.inputs import between_notes, input_signals, parse_assignments
 from phs.workflows.loader import load_model
 
 
@@ -75,8 +75,8 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     png = _figure_png(res) if args.plot else None
     summary = _summary(args, res, runtime) if args.json else None
-    if args.out is not None:
-        res.to_csv(args.out)
+    if args.out is not None:  # with how each input behaved between the samples: a fit of the file replays this run
+        res.to_csv(args.out, between=between_notes(system, args.input, u))
     if png is not None:
         write_atomic(args.plot, png)
     if summary is not None:
