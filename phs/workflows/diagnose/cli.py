@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 
 from phs.errors import InputDataError
 from phs.io import write_atomic
@@ -51,7 +52,8 @@ def add_subcommand(sub) -> None:
 
 
 def run_diagnose(args: argparse.Namespace) -> int:
-    """Run ``phs diagnose``; every output is prepared before the first file is written."""
+    """Run ``phs diagnose``; every output is prepared before the first file is written.  Returns 0, or
+    :data:`EXIT_REFUSED` when the nominal model cannot describe the recording."""
     from components.candidates import LIBRARY
     from phs.workflows.cli_options import _check_writable, _name_list
     from phs.workflows.cli_recordings import model_and_recordings
@@ -90,4 +92,14 @@ def run_diagnose(args: argparse.Namespace) -> int:
         from phs.workflows.diagnose.discover import write_source
 
         write_source(args.discover_out, emitted)
+    if d.refused:  # the JSON and the report are written with the figures; the exit code says no verdict was reached
+        from phs.workflows.diagnose.refusal import headline
+
+        print(f"phs diagnose: {headline(d.verdict, args.data)}", file=sys.stderr)
+        return EXIT_REFUSED
     return 0
+
+
+EXIT_REFUSED = 1
+"""Exit code of ``phs diagnose`` when the nominal model cannot describe the recording (no effect named; one
+line on stderr says which channel and what to check)."""

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+import phs.workflows.diagnose.refusal as refusal
 import phs.workflows.diagnose.report as report
 from phs.workflows.diagnose.ranking import (
     FAILED_FACTOR,
@@ -49,7 +50,7 @@ class Diagnosis:
 
     @property
     def effect(self) -> str:
-        """The main effect's name, or ``"none"``."""
+        """The main effect's name, ``"none"``, or ``"model_cannot_describe"`` (:attr:`refused`)."""
         return self.verdict["effect"]
 
     @property
@@ -123,8 +124,16 @@ class Diagnosis:
             "seconds": self.seconds,
         }
 
+    @property
+    def refused(self) -> bool:
+        """The nominal model cannot describe the recording: no effect was named
+        (:mod:`~phs.workflows.diagnose.refusal`)."""
+        return self.verdict["effect"] == refusal.REFUSED
+
     def summary(self) -> str:
         v = self.verdict
+        if self.refused:
+            return refusal.summary(self)
         lines = [f"Diagnosis of {self.system.name!r} ({self.seconds:.1f} s): verdict {v['effect']}"
                  + (f" (effects: {', '.join(v['effects'])})" if len(v["effects"]) > 1 else "")
                  + f", confidence {v['confidence']:.2f}", "  " + v["explanation"],

@@ -13,6 +13,7 @@ from phs.errors import InputDataError, ParameterError
 from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick, partial
+from phs.workflows.diagnose.refusal import refusal
 from phs.workflows.diagnose.result import Diagnosis, _verdict
 from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _screen_and_refit
 
@@ -81,6 +82,11 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     Returns
     -------
     Diagnosis
+        Its verdict is ``"model_cannot_describe"`` (no effect named, no hypothesis fitted) when the
+        refitted nominal model cannot describe some fitted channel at all: its simulated output's
+        correlation with the recording below 0.5 or its spread a decade or more off the recorded one
+        (:func:`~phs.workflows.diagnose.refusal.cannot_describe`); ``verdict["cannot_describe"]`` then
+        names the channels, their figures and what to check (units, ``--map``, sign, time column).
 
     Examples
     --------
@@ -93,6 +99,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"])
     >>> d.effect
     'offset'
+    >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": 1000 * y}), free=["R.R"])  # mV read as V
+    >>> d.effect, d.verdict["cannot_describe"][0]["reasons"], d.hypotheses
+    ('model_cannot_describe', ['scale'], [])
     """
     from components.candidates import LIBRARY, Scales
     from phs.workflows.diagnose.hypotheses import Data, train_result
@@ -135,6 +144,12 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     if not (weights is None or weights == "ml" or isinstance(weights, dict)):
         raise ParameterError(f"diagnose: weights must be 'ml', None or a dict of channel weights, got {weights!r}")
     nominal, data = fit_nominal(system, data, n_jobs)
+    refused = refusal(nominal, data)
+    if refused is not None:  # units, signs or mappings: no effect is named on top of a model that describes nothing
+        if progress:
+            print(f"diagnose {system.name}: the nominal model cannot describe "
+                  f"{', '.join(c['channel'] for c in refused['cannot_describe'])}; no hypothesis is fitted", file=sys.stderr, flush=True)
+        return Diagnosis(system, outs, nominal, [], [], [], nominal, refused, noise, time.perf_counter() - wall, [], data)
     data0 = data  # the nominal model's data (a rival correction is fitted from the nominal model)
     findings = _locate(nominal, system, data, noise)
     current, accepted, all_hyps, rounds = nominal, [], [], []
