@@ -53,6 +53,7 @@ from codegen._grid import time_grid
 from codegen._mapped import Mapped, default_threads, quiet
 from codegen._output import energy_columns
 from codegen._serialize import deserialize_functions, serialize_functions
+from codegen._solver_errors import describe
 from codegen.functions import generate
 from codegen.simulator import Simulator
 from phs.errors import DomainError, InputDataError, PHSError, SimulationError
@@ -330,7 +331,8 @@ class BatchSimulator:
             except PHSError as exc:
                 return exc
             except RuntimeError as exc:
-                return SimulationError(f"simulation of {self.system.name!r} failed: {str(exc).splitlines()[-1][:200]}")
+                return SimulationError(describe(exc, self.system, t0=float(self.t[0]), t1=float(self.t[-1]), x=x0, p=p,
+                                                max_steps=self.simulator.max_steps))
         return SimulationError(f"simulation of {self.system.name!r}: the integrator failed in the batch evaluation "
                                "but not when run alone")
 

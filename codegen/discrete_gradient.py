@@ -39,6 +39,7 @@ import numpy as np
 from codegen._domain import DomainCheck, fmt_state
 from codegen._grid import time_grid
 from codegen._inputs import initial_state, input_signals, inputs_at
+from codegen._solver_errors import state_story
 from codegen.functions import generate
 from codegen.results import SimulationResult
 from phs.errors import InputDataError, SimulationError
@@ -226,8 +227,11 @@ def _run(s, t, u, x0, params, newton_tol, midpoint: bool) -> SimulationResult:
     if k < len(res):
         what = "the state became non-finite" if not np.all(np.isfinite(X[k + 1])) else (
             f"Newton's method did not converge (scaled residual {res[k]:.3g} > {newton_tol:.3g})")
+        rates = np.asarray(f.rhs(X[k], u_mid[k], p), dtype=float).reshape(-1)
         raise SimulationError(f"discrete-gradient simulation of {s.name!r} failed in the step from t={t[k]:.6g} "
-                              f"to t={t[k + 1]:.6g}: {what}; state at t={t[k]:.6g}: {fmt_state(s, X[k])}")
+                              f"to t={t[k + 1]:.6g}: {what}; state at t={t[k]:.6g}: {fmt_state(s, X[k])}: "
+                              f"{state_story(s, X[k], rates, h[k], u_mid[k], p)}; try a finer grid (--dt, or more points "
+                              "in t) or the cvodes method, which adapts its steps")
     H0 = float(f.hamiltonian(X[0], u_grid[0], p))
     energy_scale = max(abs(H0), float(np.max(np.abs(Hs))), float(np.max(flow)), 1e-300)
     stats = {"method": "implicit_midpoint" if midpoint else "discrete_gradient", "steps": n, "newton_tol": newton_tol,

@@ -41,6 +41,7 @@ from codegen._interpolants import _digest, _interpolant, interpolation
 from codegen._layout import ParamLayout
 from codegen._output import call_into_numpy, energy_accounts, energy_columns
 from codegen._plan import plan_for
+from codegen._solver_errors import describe
 from codegen.discrete_gradient import discrete_gradient_simulate
 from codegen.functions import _model_hash, generate
 from codegen.results import SimulationResult
@@ -93,6 +94,13 @@ NEGLIGIBLE = 1e-100
 """A run whose integration fails is tried once more with the state's components below this share of their
 typical magnitude set to zero: CVODES restarted from a state holding such values (charges of 1e-170 C on
 the curling HASEL decaying at 0 V) can fail with repeated right-hand-side errors where it passes from 0."""
+
+
+REACH_SHARES = tuple(sorted({2.0 ** -k for k in range(1, 25)} | {1.0 - 2.0 ** -k for k in range(1, 25)}
+                            | {j / 16 for j in range(1, 16)}))
+"""Output times, as shares of a failed output interval, of the one integrator call that finds how far into
+it the integration gets (:meth:`Simulator._reach`): factors of 2 near its start, halvings of the rest near
+its end (a blow-up just before the end), sixteenths in between."""
 
 
 class Simulator:
@@ -369,7 +377,9 @@ class Simulator:
                                np.vstack([r.u for _, r in done]))
 
     def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, exc, sigs):
-        """Re-run the failed run one output step at a time to name the failing interval and state."""
+        """Re-run the failed run one output step at a time to name the failing interval, find how far one
+        call gets into it (:meth:`_reach`) and say in words what failed there, which state and what to try
+        (:func:`codegen._solver_errors.describe`)."""
         s = self.system
         F1, _ = self._integrator(1, slots, sampled)
         zc = z
@@ -377,17 +387,57 @@ class Simulator:
             P = self._pvec(p, a + k * h, h, layout, choice)
             try:
                 zc = np.asarray(F1(x0=zc, p=P)["xf"]).reshape(-1)
-            except RuntimeError:
+            except RuntimeError as step_exc:
                 xs = zc * self.scale
                 tk = a + k * h
                 uk = self._eval_inputs(sigs, slots, choice, np.array([tk]))
                 self._check_domain(xs[None, :], np.array([tk]), p, uk)
                 self._domain.predicted(xs, tk, h, p, uk)
-                raise SimulationError(
-                    f"simulation of {s.name!r}: the integrator failed between t={tk:.6g} and t={tk + h:.6g}; "
-                    f"state at t={tk:.6g}: " + fmt_state(s, xs) + f" ({str(exc).splitlines()[-1][:200]})"
-                ) from None
+                covered, step, zr = self._reach(F1, zc, p, tk, h, layout, choice, sampled)
+                if covered >= 1.0:  # shorter output steps pass through: the state where the interval starts
+                    covered, zr = 0.0, zc
+                tr, xr = tk + covered * h, zr * self.scale
+                ur = self._eval_inputs(sigs, slots, choice, np.array([tr])) if covered > 0 else uk
+                if covered > 0:  # the state the integrator got to: left the domain on the way there?
+                    self._check_domain(xr[None, :], np.array([tr]), p, ur)
+                across = tk + h * np.array((0.0, *REACH_SHARES, 1.0))
+                with np.errstate(all="ignore"):
+                    u_across = self._eval_inputs(sigs, slots, choice, across)
+                raise SimulationError(describe(step_exc, s, t0=tk, t1=tk + h, t=tr, x=xr, u=ur[0], p=p, functions=self.f,
+                                               max_steps=self.max_steps, dt=step * h, inputs=(across, u_across))) from None
             if not np.all(np.isfinite(zc)):
                 break
-        raise SimulationError(f"simulation of {s.name!r}: the integrator failed in [{a:.6g}, {a + n * h:.6g}] "
-                              f"({str(exc).splitlines()[-1][:200]})") from None
+        uk = self._eval_inputs(sigs, slots, choice, np.array([a]))
+        raise SimulationError(describe(exc, s, t0=a, t1=a + n * h, x=z * self.scale, u=uk[0], p=p, functions=self.f,
+                                       max_steps=self.max_steps)) from None
+
+    def _reach(self, F1, z, p, tk, h, layout, choice, sampled):
+        """``(covered, step, state)``: how far into the failed output interval ``[tk, tk + h]`` the integrator
+        gets from the scaled state ``z`` with an output at each of :data:`REACH_SHARES`: the last share it
+        reaches (0 when none; 1 when every one, the interval as a whole having failed), the longest of the
+        shorter output intervals it passed (as a share, 0 when none), and the scaled state it reached.
+        One call of an integrator of ``F1``'s equations and options, whose outputs land in numpy as they
+        are reached (a failure keeps the ones before it)."""
+        opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
+                "disable_internal_warnings": True, "show_eval_warnings": False}
+        if any(g is not None for g in sampled):
+            opts["max_step_size"] = 1.0
+        opts.update(self.integrator_options)
+        zs = np.full((len(REACH_SHARES), len(z)), np.nan)
+        try:
+            G = ca.integrator(f"{F1.name()}_reach", "cvodes", F1.get_function("dae"), 0.0, list(REACH_SHARES), opts)
+            buf, trigger = G.buffer()
+            z = np.ascontiguousarray(z, dtype=float)
+            P = np.ascontiguousarray(self._pvec(p, tk, h, layout, choice), dtype=float)
+            buf.set_arg(0, memoryview(z))
+            buf.set_arg(2, memoryview(P))
+            buf.set_res(0, memoryview(zs))
+            trigger()
+        except RuntimeError:
+            pass
+        ok = np.all(np.isfinite(zs), axis=1)
+        k = len(ok) if ok.all() else int(np.argmin(ok))  # outputs are written in order: the first not reached
+        if k == 0:
+            return 0.0, 0.0, z
+        covered = 1.0 if k == len(ok) else REACH_SHARES[k - 1]
+        return covered, float(np.max(np.diff((0.0,) + REACH_SHARES[:k]))), zs[k - 1]

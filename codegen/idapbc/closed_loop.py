@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
+from codegen._solver_errors import describe
 from codegen.functions import generate
 from codegen.idapbc.model import state_vector
 from codegen.results import signal, write_csv_atomic
@@ -213,8 +214,9 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     try:
         out = F(x0=z0)
     except RuntimeError as exc:
-        raise SimulationError(f"closed-loop simulation of {plant.name!r} under {ctrl.name!r}: the integrator failed "
-                              f"({str(exc).splitlines()[-1][:200]})") from None
+        k, zk = _reached(F, z0, len(t) - 1)  # the last output time the integrator got to, and the state there
+        raise SimulationError(describe(exc, plant, t0=float(t[k]), t1=float(t[k + 1]), x=zk[:n] * s, p=p, max_steps=max_steps,
+                                       subject=f"closed-loop simulation of {plant.name!r} under {ctrl.name!r}")) from None
     Zs = np.hstack([z0[:, None], np.asarray(out["xf"], dtype=float)]).T
     if not np.all(np.isfinite(Zs)):
         k = int(np.argmax(~np.all(np.isfinite(Zs), axis=1)))
@@ -257,3 +259,20 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
             info["input_ranges"][nm] = {"min": float(col.min()), "max": float(col.max()), "range": list(r),
                                         "exceeded": bool(col.min() < r[0] - 1e-9 * abs(r[0]) or col.max() > r[1] + 1e-9 * abs(r[1]))}
     return ClosedLoopResult(ctrl, plant, t, Xt, XIt, Ut, meas, H_d, H_cl, p, info)
+
+
+def _reached(F, z0, n: int) -> tuple[int, np.ndarray]:
+    """``(k, z)``: the index of the last output time (0: the start) an integrator ``F`` over ``n`` output
+    times reaches from ``z0`` before it fails, and the state there (its outputs land in numpy as reached)."""
+    zs = np.full((n, len(z0)), np.nan)
+    buf, trigger = F.buffer()
+    z0 = np.ascontiguousarray(z0, dtype=float)
+    buf.set_arg(0, memoryview(z0))
+    buf.set_res(0, memoryview(zs))
+    try:
+        trigger()
+    except RuntimeError:
+        pass
+    ok = np.all(np.isfinite(zs), axis=1)
+    k = int(np.argmin(ok)) if not ok.all() else n - 1  # the first output time not reached
+    return k, (zs[k - 1] if k > 0 else z0)

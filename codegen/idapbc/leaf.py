@@ -21,6 +21,7 @@ import numpy as np
 import scipy.integrate
 import scipy.linalg
 
+from codegen._solver_errors import in_words
 from phs.errors import EquilibriumError
 
 if TYPE_CHECKING:
@@ -213,7 +214,7 @@ class Leaf:
                 out = F(x0=y0, p=np.concatenate([x_from, dxf]))
             except RuntimeError as exc:
                 raise EquilibriumError("could not follow the conserved quantities along the leaf: "
-                                       + str(exc).splitlines()[-1][:160]) from None
+                                       + in_words(str(exc).splitlines()[-1], hint="")) from None
             yf = np.asarray(out["xf"], dtype=float).reshape(-1)
             if not np.all(np.isfinite(yf)):
                 raise EquilibriumError("could not follow the conserved quantities along the leaf (non-finite)")

@@ -4,7 +4,9 @@ Each subcommand is defined in its workflow's own module (``phs.workflows.simulat
 ``fit_cli``, ``passivity_cli``, ``control_cli``, ``diagnose.cli``, ``sweep.cli``, ``export_cli``, ``list_cli``): one
 ``add_subcommand`` function declaring its options and one ``run_<name>`` function doing the work.
 Errors the project raises on purpose (:class:`~phs.errors.PHSError`) are printed as one line
-``phs: error: <message>`` with exit code 2, and no output file is written.
+``phs: error: <message>`` with exit code 2, and no output file is written; an integrator's failure is
+printed in words (what happened, where, what to try: :mod:`codegen._solver_errors`), never as its
+return flag alone or the C++ file that reported it.
 
 Examples
 --------
@@ -60,7 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _one_line(message: str) -> str:
-    return message.replace(":\n  - ", ": ").replace("\n  - ", "; ").replace("\n", " ")
+    from codegen._solver_errors import in_words  # an integrator's raw failure inside a message, in words
+
+    return in_words(message).replace(":\n  - ", ": ").replace("\n  - ", "; ").replace("\n", " ")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -89,6 +93,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.run(args)
     except PHSError as exc:
+        print(f"phs: error: {_one_line(str(exc))}", file=sys.stderr)
+        return EXIT_ERROR
+    except RuntimeError as exc:  # an integrator's failure that reached here unnamed: in words, not its C++ source
+        from codegen._solver_errors import failure_code
+
+        if failure_code(exc) is None:
+            raise
         print(f"phs: error: {_one_line(str(exc))}", file=sys.stderr)
         return EXIT_ERROR
     except OSError as exc:

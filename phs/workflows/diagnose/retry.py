@@ -50,9 +50,26 @@ class FitFailed(PHSError):
         super().__init__(f"{first} (and {len(reasons) - 1} retries failed)" if len(reasons) > 1 else first)
 
 
+FIT_HINT = "at parameter values the fit tried"
+"""What a fit's integrator failure adds to its words (:func:`codegen._solver_errors.in_words`)."""
+
+
 def reason(exc: BaseException) -> str:
-    """The first line of an exception's message (its type when it has none)."""
-    msg = str(exc).strip()
+    """The first line of an exception's message (its type when it has none), an integrator's failure put in
+    words (what happened, at parameter values the fit tried) instead of its C++ source file and return flag.
+
+    Examples
+    --------
+    >>> raw = '.../cvodes_interface.cpp:403: CVode returned "CV_CONV_FAILURE". Consult CVODES documentation.'
+    >>> print(reason(RuntimeError(raw)))  # doctest: +NORMALIZE_WHITESPACE
+    the integrator failed: the Newton iterations of its implicit steps failed repeatedly (the dynamics are
+    very stiff or not smooth there), at parameter values the fit tried (CV_CONV_FAILURE)
+    >>> reason(ValueError())
+    'ValueError'
+    """
+    from codegen._solver_errors import in_words
+
+    msg = in_words(str(exc).strip(), hint=FIT_HINT)
     return msg.splitlines()[0] if msg else type(exc).__name__
 
 

@@ -13,6 +13,7 @@ import time as _time
 import numpy as np
 import scipy.optimize
 
+from codegen._solver_errors import in_words
 from codegen.simulator import Simulator, simulate
 from phs.errors import InputDataError, ParameterError, PHSError, SimulationError
 from phs.signals import Sampled
@@ -202,7 +203,8 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         try:
             return np.asarray(prob.jac(z)[1])
         except RuntimeError as exc:
-            raise PHSError(f"identify {system.name!r}: the sensitivity simulation failed: {str(exc).splitlines()[-1]}") from None
+            raise PHSError(f"identify {system.name!r}: the sensitivity simulation failed: "
+                           + in_words(str(exc).splitlines()[-1], hint="at parameter values the fit tried")) from None
 
     # multiple shooting: continuation on the defect weight, from loose (windows fit the data
     # almost freely) to tight (one continuous trajectory)
