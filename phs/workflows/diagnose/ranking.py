@@ -161,8 +161,10 @@ def _pick(nominal, hyps, data=None):
         if share is not None and share < FRICTION_LIKE and friction:
             f = friction[0]
             f.same_physics.append(pick.label)
+            from phs.workflows.diagnose.report import residual_change
+
             f.notes.append(f"A hysteresis element at {pick.augmentation.attached_to} fits a little better (validation residual "
-                           f"{100 * _gain(nominal, pick):+.1f} % against {100 * _gain(nominal, f):+.1f} %), but its loop closes "
+                           f"{residual_change(_gain(nominal, pick))} against {residual_change(_gain(nominal, f))}), but its loop closes "
                            f"within {100 * share:.2g} % of the motion's standard deviation: that is the pre-sliding regime of "
                            f"friction, not a hysteresis of the material, and smooth Coulomb friction describes it with fewer parameters.")
             pick = f

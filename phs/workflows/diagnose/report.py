@@ -13,7 +13,7 @@ import numpy as np
 
 from phs.io import write_atomic
 from phs.workflows.diagnose.mismatch import _features
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, _delta_bic, _gain
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_VALIDATION_GAIN, _delta_bic, _gain
 
 # which located findings speak for which effect (used to say where an effect showed)
 _EVIDENCE = {
@@ -37,6 +37,24 @@ def _fmt_params(values: dict) -> str:
     return ", ".join(f"{k.split('.', 1)[-1]} = {v:.3g}" for k, v in values.items())
 
 
+def residual_change(gain: float) -> str:
+    """A relative change of a validation residual as the reports print it, from its relative decrease
+    ``gain`` (:func:`~phs.workflows.diagnose.ranking._gain`): a rise with "+" and "rose", a fall with "−"
+    and "fell".
+
+    Examples
+    --------
+    >>> residual_change(-0.02), residual_change(0.153), residual_change(0.0)
+    ('+2.0 % (rose)', '−15.3 % (fell)', '0.0 % (unchanged)')
+    """
+    change = -100.0 * float(gain)
+    if math.isnan(change):
+        return "not finite"
+    if round(change, 1) == 0:
+        return "0.0 % (unchanged)"
+    return f"+{change:.1f} % (rose)" if change > 0 else f"−{-change:.1f} % (fell)"
+
+
 def _fits(nominal, h, outs) -> str:
     parts = []
     for ch in outs:
@@ -55,8 +73,8 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
         tail = (" The residual " + ("looks white" if all(f.details.get("p_value", 0) > 0.01 for f in white) else "keeps some structure")
                 + " (" + "; ".join(f"{f.channel}: {f.where}" for f in white) + ").") if white else ""
         return (f"No missing physics found: no candidate improves the fit beyond what noise explains. The best, "
-                f"{rival.augmentation.effect} at {rival.augmentation.attached_to}, changes the validation residual by "
-                f"{100 * g:+.1f} % with ΔBIC {_delta_bic(nominal, rival):+.1f} (thresholds: −1 % and −10).{tail}")
+                f"{rival.augmentation.effect} at {rival.augmentation.attached_to}: validation residual "
+                f"{residual_change(g)}, ΔBIC {_delta_bic(nominal, rival):+.1f} (acceptance needs −1 % and −10 or lower).{tail}")
     from components.candidates import LIBRARY
 
     summaries = {c.effect: c.summary for c in LIBRARY}
@@ -74,8 +92,8 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
                    + "".join(f" {n}" for n in h.notes))
     if rival is not None:
         g = _gain(nominal, rival)
-        out.append(f"Next best explanation: {rival.augmentation.effect} at {rival.augmentation.attached_to} "
-                   f"(validation residual {100 * g:+.1f} %).")
+        out.append(f"Next best explanation: {rival.augmentation.effect} at {rival.augmentation.attached_to}; its "
+                   f"validation residual {residual_change(g)}.")
     return " ".join(out)
 
 
@@ -150,11 +168,11 @@ def figure_hypotheses(d) -> bytes:
 
     hs = [h for h in d.hypotheses if h.ok]
     fig, ax = plt.subplots(figsize=(8, 0.3 * max(len(hs), 4) + 1))
-    gains = [100 * _gain(d.nominal, h) for h in hs]  # against the model each extends, on the data it was scored on
+    changes = [-100 * _gain(d.nominal, h) for h in hs]  # against the model each extends, on the data it was scored on
     colors = ["tab:green" if any(h is a for a in d.accepted) else "tab:gray" for h in hs]
-    ax.barh([h.label for h in hs][::-1], gains[::-1], color=colors[::-1])
-    ax.axvline(100 * 0.01, color="k", lw=0.8, ls="--")
-    ax.set_xlabel("validation residual decrease [%] (dashed: acceptance threshold)")
+    ax.barh([h.label for h in hs][::-1], changes[::-1], color=colors[::-1])
+    ax.axvline(-100 * MIN_VALIDATION_GAIN, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("validation residual change [%] (negative: it fell; dashed: acceptance threshold)")
     fig.tight_layout()
     return _png(fig)
 

@@ -157,7 +157,8 @@ class Diagnosis:
         for h in [h for h in self.hypotheses if h.ok][:8]:
             vf = ", ".join(f"{k} {x:.2f}" for k, x in h.validation_fit_percent.items())
             lines.append(f"    {h.label:<32} validation fit {vf}; ΔBIC {_delta_bic(self.nominal, h):+.1f}; "
-                         f"gain {100 * _gain(self.nominal, h):+.1f} %" + (" (screening)" if h.stage != "full" else "")
+                         f"validation residual {report.residual_change(_gain(self.nominal, h))}"
+                         + (" (screening)" if h.stage != "full" else "")
                          + (" (no improvement: the fit ended at the nominal model)" if h.no_improvement else "")
                          + (f" (the data do not determine {', '.join(h.undetermined)} separately)"
                             if undetermined_effect(h) else "")
@@ -182,12 +183,12 @@ class Diagnosis:
         fits = [(ch, self.nominal.fit_percent[ch], self.nominal.validation_fit_percent[ch], self.final.fit_percent[ch],
                  self.final.validation_fit_percent[ch]) for ch in self.outputs]
         hyps = [(h.label, ", ".join(f"{k} {x:.2f}" for k, x in h.validation_fit_percent.items()),
-                 _delta_bic(self.nominal, h), 100 * _gain(self.nominal, h),
+                 _delta_bic(self.nominal, h), report.residual_change(_gain(self.nominal, h)),
                  "yes" if any(h is a for a in self.accepted) else "") for h in self.hypotheses if h.ok][:8]
         return (html_table(["output", "nominal fit %", "nominal validation %", "final fit %", "final validation %"],
                            fits, caption=head)
                 + f"<p>{html.escape(v['explanation'])}</p>"
-                + html_table(["hypothesis", "validation fit %", "ΔBIC", "gain %", "accepted"], hyps))
+                + html_table(["hypothesis", "validation fit %", "ΔBIC", "validation residual change", "accepted"], hyps))
 
     def write_report(self, directory) -> None:
         """HTML report with figures, and ``diagnosis.json``, into ``directory`` (written atomically)."""
