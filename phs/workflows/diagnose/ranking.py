@@ -112,6 +112,24 @@ def _gain(nominal, h) -> float:
     return float((ref - h.validation_rss) / ref)
 
 
+def residual_change(gain: float) -> str:
+    """A relative change of a validation residual as the reports print it, from its relative decrease
+    ``gain`` (:func:`~phs.workflows.diagnose.ranking._gain`): a rise with "+" and "rose", a fall with "−"
+    and "fell".
+
+    Examples
+    --------
+    >>> residual_change(-0.02), residual_change(0.153), residual_change(0.0)
+    ('+2.0 % (rose)', '−15.3 % (fell)', '0.0 % (unchanged)')
+    """
+    change = -100.0 * float(gain)
+    if math.isnan(change):
+        return "not finite"
+    if round(change, 1) == 0:
+        return "0.0 % (unchanged)"
+    return f"+{change:.1f} % (rose)" if change > 0 else f"−{-change:.1f} % (fell)"
+
+
 def _delta_bic(nominal, h) -> float:
     ref = h.reference_bic if h.reference_bic is not None else nominal.bic
     return float(h.bic - ref)
@@ -161,8 +179,6 @@ def _pick(nominal, hyps, data=None):
         if share is not None and share < FRICTION_LIKE and friction:
             f = friction[0]
             f.same_physics.append(pick.label)
-            from phs.workflows.diagnose.report import residual_change
-
             f.notes.append(f"A hysteresis element at {pick.augmentation.attached_to} fits a little better (validation residual "
                            f"{residual_change(_gain(nominal, pick))} against {residual_change(_gain(nominal, f))}), but its loop closes "
                            f"within {100 * share:.2g} % of the motion's standard deviation: that is the pre-sliding regime of "

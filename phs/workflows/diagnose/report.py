@@ -13,7 +13,7 @@ import numpy as np
 
 from phs.io import write_atomic
 from phs.workflows.diagnose.mismatch import _features
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_VALIDATION_GAIN, _delta_bic, _gain
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_VALIDATION_GAIN, _delta_bic, _gain, residual_change
 
 # which located findings speak for which effect (used to say where an effect showed)
 _EVIDENCE = {
@@ -35,24 +35,6 @@ _EVIDENCE = {
 
 def _fmt_params(values: dict) -> str:
     return ", ".join(f"{k.split('.', 1)[-1]} = {v:.3g}" for k, v in values.items())
-
-
-def residual_change(gain: float) -> str:
-    """A relative change of a validation residual as the reports print it, from its relative decrease
-    ``gain`` (:func:`~phs.workflows.diagnose.ranking._gain`): a rise with "+" and "rose", a fall with "−"
-    and "fell".
-
-    Examples
-    --------
-    >>> residual_change(-0.02), residual_change(0.153), residual_change(0.0)
-    ('+2.0 % (rose)', '−15.3 % (fell)', '0.0 % (unchanged)')
-    """
-    change = -100.0 * float(gain)
-    if math.isnan(change):
-        return "not finite"
-    if round(change, 1) == 0:
-        return "0.0 % (unchanged)"
-    return f"+{change:.1f} % (rose)" if change > 0 else f"−{-change:.1f} % (fell)"
 
 
 def _fits(nominal, h, outs) -> str:
