@@ -91,7 +91,7 @@ def failure_code(text) -> str | None:
     text = str(text)
     for rx in (_FLAG, _NAMED):
         m = rx.search(text)
-        if m and m.group(1) in CODES:
+        if m and (m.group(1) in CODES or m.group(1)[:3] in ("CV_", "IDA")):  # an unlisted flag: "it stopped"
             return m.group(1)
     m = _CASADI_WORD.search(text)
     if m:
@@ -125,7 +125,7 @@ def in_words(text, hint: str | None = None) -> str:
         return text
     if not (code[:3] in ("CV_", "IDA") or _RAW.search(text)):  # CasADi's own words without a source file
         return text
-    kind = CODES[code]
+    kind = CODES.get(code)
     lines = [ln for ln in text.splitlines() if not ln.strip().startswith("Error in Function::")] or [text]
     head = _RAW.sub(" ", " ".join(lines))
     head = re.sub(r"\s*(?:\w+ )?returned \"?[A-Z_]+\"?\.?|\b" + re.escape(code) + r"\b", "", head).strip(" :.")
@@ -178,7 +178,8 @@ def _story(system, x, xdot=None, u=None, p=None) -> tuple[str, float]:
             parts.append(f"{states[k].name} moves fastest (rate {float(np.ravel(xdot)[k]):.3g} {unit} per s: its typical "
                          f"size {typical[k]:.4g} in {1 / r[k] if r[k] > 0 else np.inf:.3g} s)")
         else:
-            parts.append(f"largest state {states[k].name} = {x[k]:.4g} ({ratio[k]:.3g} of its typical size)")
+            parts.append(f"every state inside its range (the largest against its typical size: {states[k].name} = "
+                         f"{x[k]:.4g}, {ratio[k]:.2g} of it)")
     parts += _outside(system.params, p, "parameter")
     return "; ".join(parts), far
 
@@ -267,10 +268,10 @@ def describe(error, system, *, t0=None, t1=None, t=None, x=None, u=None, p=None,
     >>> print(describe(err, rc_circuit(), t0=0.0, t1=1e6, t=1.0, x=[1e-6], max_steps=20000, dt=0.5))
     ... # doctest: +NORMALIZE_WHITESPACE
     simulation of 'rc': the integrator failed between t=0 and t=1e+06 (reached t=1): it took its maximum
-    number of internal steps (20000) within one output interval; at t=1: largest state C.Q = 1e-06 (0.1 of
-    its typical size); try a finer output step (--dt, or more points in t: the step limit counts per output
-    interval) of 0.5 s or less, a shorter run (--t-end), or a parameter that does not make the model this
-    fast (state: C.Q=1e-06; CV_TOO_MUCH_WORK)
+    number of internal steps (20000) within one output interval; at t=1: every state inside its range (the
+    largest against its typical size: C.Q = 1e-06, 0.1 of it); try a finer output step (--dt, or more
+    points in t: the step limit counts per output interval) of 0.5 s or less, a shorter run (--t-end), or
+    a parameter that does not make the model this fast (state: C.Q=1e-06; CV_TOO_MUCH_WORK)
     """
     code = failure_code(error)
     kind = CODES.get(code) if code else None
