@@ -35,7 +35,7 @@ import sympy as sp
 
 from phs._sparse import srepr_matrix
 from phs.errors import InputDataError, PHSError, UnitError
-from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo
+from phs.params import Condition, EnergyTerm, InputInfo, Measured, StateInfo, stored_param
 from phs.stored_expressions import parse_srepr
 from phs.units import parse_unit
 
@@ -322,7 +322,7 @@ def system_arguments(data: dict, source: str = "<dict>") -> dict[str, Any]:
         params = []
         for i, p in enumerate(r.items(data, "params")):
             w = f"params[{i}]"
-            params.append(Param(r.get(p, "name", w, str), r.number(p, "value", w), r.unit(p, "unit", w),
+            params.append(stored_param(r.get(p, "name", w, str), r.number(p, "value", w), r.unit(p, "unit", w),
                                 r.get(p, "description", w, str, ""), r.range(p, "range", w, None),
                                 r.get(p, "positive", w, (bool, type(None)), None)))
         energy = []

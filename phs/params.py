@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import sympy as sp
 
@@ -59,6 +59,8 @@ class Param:
     range : (float, float), optional
         Physical range used by checks and sampling.  Defaults to a decade
         either side of a positive value, or ``[-|v|-1, |v|+1]`` otherwise.
+        A declared value outside it is refused (:class:`ParameterError`); a value
+        set later (:meth:`with_value`, ``with_params``) only warns (:meth:`checked`).
     positive : bool, optional
         Whether the symbol carries sympy's ``positive`` assumption (used to
         decide definiteness symbolically).  Defaults to ``value > 0``.
@@ -68,6 +70,10 @@ class Param:
     >>> K_b = Param("K_b", 0.04, "N*m/rad", "torsional stiffness of the bottom film")
     >>> K_b.symbol, K_b.range
     (K_b, (0.004, 0.4))
+    >>> Param("K_b", 0.5, "N*m/rad", range=(0.01, 0.1))
+    Traceback (most recent call last):
+    ...
+    phs.errors.ParameterError: parameter 'K_b' = 0.5 [N*m/rad] is outside its declared range [0.01, 0.1]
     """
 
     name: str
@@ -98,12 +104,26 @@ class Param:
             else:
                 rng = (-abs(v) - 1.0, abs(v) + 1.0)
             object.__setattr__(self, "range", rng)
-        lo, hi = (float(r) for r in self.range)
+        try:
+            lo, hi = (float(r) for r in self.range)
+        except (TypeError, ValueError):
+            raise ModelError(f"parameter {self.name!r}: range {self.range!r} is not a pair of numbers (lo, hi)") from None
         if not lo <= hi:
             raise ModelError(f"parameter {self.name!r}: range [{lo}, {hi}] has lower > upper")
         object.__setattr__(self, "range", (lo, hi))
         if self.positive and self.value is not None and not self.value > 0:
             raise ModelError(f"parameter {self.name!r} is declared positive but its value is {self.value:g}")
+        if self.value is not None and not lo <= self.value <= hi:
+            raise ParameterError(f"parameter {self.name!r} = {self.value:g} [{self.unit}] is outside its declared range "
+                                 f"[{lo:g}, {hi:g}]")
+
+    def _copy(self, **changes) -> Param:
+        """Copy with fields changed, without the checks of a declaration: only for a value that passed
+        :meth:`checked` (which warns, not refuses, outside the declared range) or a new name."""
+        out = object.__new__(Param)
+        for f in fields(Param):
+            object.__setattr__(out, f.name, changes.get(f.name, getattr(self, f.name)))
+        return out
 
     def checked(self, value, where: str = "") -> float:
         """``value`` as a float, refused unless finite and of the declared sign; warned outside the range.
@@ -112,7 +132,9 @@ class Param:
         passes here: a parameter declared positive (a resistance, a capacitance, a mass) refuses
         zero and negative values with a :class:`ParameterError` naming it; a value outside the
         declared range is accepted with a :class:`ParameterRangeWarning` (ranges bound sampling and
-        fits, not physics).  ``where`` is appended to the message (e.g. ``" (--param)"``).
+        fits, not physics: a fit may end outside them when given wider bounds, a study may look
+        past them) and the range is kept.  Only a declaration whose own value lies outside its
+        range is refused (:class:`Param`).  ``where`` is appended to the message (e.g. ``" (--param)"``).
 
         Examples
         --------
@@ -201,11 +223,49 @@ class Param:
         >>> Param("R", 1e3, "Ohm").with_value(2e3).value
         2000.0
         """
-        return Param(self.name, self.checked(value), self.unit, self.description, self.range, self.positive)
+        return self._copy(value=self.checked(value))
 
     def renamed(self, name: str) -> Param:
-        """Copy under another name (used to untie a shared parameter)."""
-        return Param(name, self.value, self.unit, self.description, self.range, self.positive)
+        """Copy under another name (used to untie a shared parameter).
+
+        Examples
+        --------
+        >>> Param("K_b", 0.04, "N*m/rad").renamed("seg2.K_b").name
+        'seg2.K_b'
+        """
+        return self._copy(name=check_name(name, "parameter"))
+
+
+def stored_param(name: str, value, unit: str = "1", description: str = "", range=None, positive=None) -> Param:
+    """A parameter read back from a saved model.
+
+    A saved value may be an override outside the declared range (set by ``with_params`` or a fit given
+    wider bounds, and warned then): it is restored with the same warning, not refused as a declaration
+    would be.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     p = stored_param("R", 1e9, "Ohm", "", (1e2, 1e4), True)
+    >>> p.value, p.range, "outside its declared range" in str(caught[0].message)
+    (1000000000.0, (100.0, 10000.0), True)
+    """
+    if range is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+        lo, hi = _pair(range, f"parameter {name!r}")
+        if lo <= hi and not lo <= value <= hi:
+            return Param(name, min(max(value, lo), hi), unit, description, (lo, hi), positive).with_value(value)
+    return Param(name, value, unit, description, range, positive)
+
+
+def _pair(rng, what: str) -> tuple[float, float]:
+    """A declared range as a tuple of two floats (a list given by the caller is not kept: it could change)."""
+    try:
+        lo, hi = (float(r) for r in rng)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what}: range {rng!r} is not a pair of numbers (lo, hi)") from None
+    return lo, hi
 
 
 def _operand(other):
@@ -259,6 +319,9 @@ class StateInfo:
     owner: str = ""
     rest: float | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "range", _pair(self.range, f"state {self.name!r}"))
+
     @property
     def symbol(self) -> sp.Symbol:
         return state_symbol(self.name)
@@ -296,6 +359,10 @@ class InputInfo:
     kind: str = "effort"
     description: str = ""
     range: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.range is not None:
+            object.__setattr__(self, "range", _pair(self.range, f"input {self.name!r}"))
 
     @property
     def symbol(self) -> sp.Symbol:
