@@ -14,7 +14,7 @@ joins pieces through junctions and eliminates everything into an explicit
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from numbers import Real
 
 import sympy as sp
@@ -119,6 +119,9 @@ class Dissipator:
     ports: tuple[Port, ...]
     power: sp.Expr | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "ports", tuple(self.ports))
+
 
 @dataclass(frozen=True)
 class Definition:
@@ -147,6 +150,12 @@ class Piece:
     definitions: tuple[Definition, ...] = ()
     conditions: tuple[Condition, ...] = ()
     references: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        # a list given by a component becomes a tuple: the piece, like the system built from it, is a value
+        for f in fields(self):
+            if isinstance(getattr(self, f.name), list):
+                object.__setattr__(self, f.name, tuple(getattr(self, f.name)))
 
 
 class Component(ABC):

@@ -20,10 +20,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
+from phs._frozen import FROZEN, FrozenDict, frozen, frozen_matrix
+from phs._parts import _as_matrix, _domain_conditions, _replaced, _strict
 from phs._sparse import nonzero_entries, srepr_matrix
 from phs.errors import ModelError, ParameterError
 from phs.io import load_system, save_system
-from phs.params import Condition, EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
+from phs.params import EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -32,69 +34,6 @@ if TYPE_CHECKING:
     from phs.checks import CheckReport
 
 _NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, "numpy"]
-
-
-def _holds_string(M) -> bool:
-    """Whether a matrix given as (nested) lists holds a string entry: sympy would parse it with ``eval``."""
-    return isinstance(M, str) or isinstance(M, (list, tuple)) and any(_holds_string(v) for v in M)
-
-
-def _strict(value, what: str, problems: list[str]) -> sp.Expr:
-    """``value`` as a sympy expression, a number or a sympy object; a string is a problem (sympy would parse it
-    with ``eval``; expressions read from files go through :mod:`phs.safe_parse`)."""
-    try:
-        return sp.sympify(value, strict=True)
-    except sp.SympifyError:
-        problems.append(f"{what} is a {type(value).__name__}, not a sympy expression or a number: {value!r}")
-        return sp.Integer(0)
-
-
-def _as_matrix(M, rows: int, cols: int, what: str, problems: list[str]) -> sp.Matrix:
-    if M is None:
-        return sp.zeros(rows, cols)
-    if _holds_string(M):
-        problems.append(f"{what} holds a string entry: give sympy expressions or numbers")
-        return sp.zeros(rows, cols)
-    try:
-        M = sp.Matrix(M) if not isinstance(M, sp.MatrixBase) else sp.Matrix(M)
-    except (TypeError, ValueError) as exc:
-        problems.append(f"{what} is not a matrix: {exc}")
-        return sp.zeros(rows, cols)
-    if cols == 0 and M.shape == (rows, 1) and rows == 0:
-        return sp.zeros(rows, cols)
-    if M.shape != (rows, cols):
-        if rows * cols == 0 and len(M) == 0:
-            return sp.zeros(rows, cols)
-        problems.append(f"{what} has shape {M.shape}, expected ({rows}, {cols})")
-        return sp.zeros(rows, cols)
-    return M
-
-
-def _domain_conditions(exprs, label: str) -> list[Condition]:
-    """Validity conditions implied by asin/acos/sqrt/log arguments inside ``exprs``."""
-    out: dict[sp.Expr, Condition] = {}
-    for ex in exprs:
-        for node in sp.preorder_traversal(ex):
-            if isinstance(node, (sp.asin, sp.acos)):
-                a = node.args[0]
-                fn = node.func.__name__
-                out.setdefault(1 - a, Condition(f"{fn} argument <= 1 in {label}", 1 - a, f"{a} <= 1"))
-                out.setdefault(1 + a, Condition(f"{fn} argument >= -1 in {label}", 1 + a, f"{a} >= -1"))
-            elif isinstance(node, sp.log):
-                a = node.args[0]
-                out.setdefault(a, Condition(f"log argument > 0 in {label}", a, f"{a} > 0"))
-            elif node.is_Pow and node.exp.is_Rational and not node.exp.is_Integer and node.exp.q == 2:
-                a = node.base
-                if not a.is_nonnegative:
-                    out.setdefault(a, Condition(f"square-root argument >= 0 in {label}", a, f"{a} >= 0"))
-    return list(out.values())
-
-
-def _replaced(expr, rule: dict):
-    """``expr`` (an expression, a matrix or nested sequences of them) with symbols replaced by ``rule``."""
-    if isinstance(expr, (list, tuple)):
-        return type(expr)(_replaced(e, rule) for e in expr)
-    return expr.xreplace(rule) if isinstance(expr, sp.Basic) or isinstance(expr, sp.MatrixBase) else expr
 
 
 class PHSystem:
@@ -190,10 +129,10 @@ class PHSystem:
         self.params = tuple(params)
         self.measured = tuple(m if isinstance(m.expr, sp.Basic)
                               else replace(m, expr=_strict(m.expr, f"measured output {m.name!r}", problems)) for m in measured)
-        self.dissipators = tuple(dissipators)
-        self.definitions = tuple(definitions)
+        self.dissipators = tuple((label, FrozenDict(entries)) for label, entries in dissipators)
+        self.definitions = tuple(frozen(d) for d in definitions)
         self.description = description
-        self.structure = dict(structure or {})
+        self.structure = frozen(dict(structure or {}))
         names = [s.name for s in self.states] + [u.name for u in self.inputs]
         dup = {x for x in names if names.count(x) > 1}
         if dup:
@@ -220,11 +159,14 @@ class PHSystem:
             raise ModelError(f"invalid port-Hamiltonian system {name!r}", problems)
         self._frozen = True
 
-    # -- immutability -------------------------------------------------------------
+    # -- immutability: matrices are ImmutableDenseMatrix, sequences tuples, mappings FrozenDict -----------
     def __setattr__(self, key, value):
         if getattr(self, "_frozen", False):
-            raise AttributeError(f"PHSystem is immutable; use with_params() or build a new system (tried to set {key!r})")
+            raise AttributeError(f"PHSystem is immutable ({FROZEN}); tried to set {key!r}")
         object.__setattr__(self, key, value)
+
+    def __delattr__(self, key):
+        raise AttributeError(f"PHSystem is immutable ({FROZEN}); tried to delete {key!r}")
 
     # -- symbols --------------------------------------------------------------------
     @property
@@ -353,29 +295,29 @@ class PHSystem:
 
     # -- derived quantities (cached) -------------------------------------------------
     @cached_property
-    def grad_H(self) -> sp.Matrix:
+    def grad_H(self) -> sp.ImmutableDenseMatrix:
         """Gradient dH/dx as a column matrix."""
-        return sp.Matrix(len(self.x), 1, [sp.diff(self.H, xi) for xi in self.x])
+        return sp.ImmutableMatrix(len(self.x), 1, [sp.diff(self.H, xi) for xi in self.x])
 
     @cached_property
-    def dynamics(self) -> sp.Matrix:
+    def dynamics(self) -> sp.ImmutableDenseMatrix:
         """Right-hand side x' as a column matrix."""
         u = sp.Matrix(len(self.u), 1, self.u)
-        return (self.J - self.R) * self.grad_H + (self.G - self.P) * u
+        return frozen_matrix((self.J - self.R) * self.grad_H + (self.G - self.P) * u)
 
     @cached_property
-    def dynamics_jacobian(self) -> sp.Matrix:
+    def dynamics_jacobian(self) -> sp.ImmutableDenseMatrix:
         """Jacobian of the right-hand side with respect to the states (symbolic)."""
-        return self.dynamics.jacobian(self.x)
+        return frozen_matrix(self.dynamics.jacobian(self.x))
 
     @cached_property
-    def port_output(self) -> sp.Matrix:
+    def port_output(self) -> sp.ImmutableDenseMatrix:
         """Power-conjugate outputs y."""
         u = sp.Matrix(len(self.u), 1, self.u)
-        return (self.G + self.P).T * self.grad_H + (self.S + self.N) * u
+        return frozen_matrix((self.G + self.P).T * self.grad_H + (self.S + self.N) * u)
 
     @cached_property
-    def measured_expressions(self) -> list[sp.Expr]:
+    def measured_expressions(self) -> tuple[sp.Expr, ...]:
         """Measured outputs as expressions of state and input (port outputs they refer to substituted)."""
         outs = {sp.Symbol(i.output, real=True): k for k, i in enumerate(self.inputs)}
         exprs = []
@@ -385,12 +327,12 @@ class PHSystem:
             if used:
                 e = e.xreplace({o: self.port_output[outs[o]] for o in used})
             exprs.append(e)
-        return exprs
+        return tuple(exprs)
 
     @cached_property
-    def dissipation_matrix(self) -> sp.Matrix:
+    def dissipation_matrix(self) -> sp.ImmutableDenseMatrix:
         """[[R, P], [P^T, S]], the quadratic form of dissipated power in z = [dH/dx; u]."""
-        return sp.Matrix.vstack(sp.Matrix.hstack(self.R, self.P), sp.Matrix.hstack(self.P.T, self.S))
+        return frozen_matrix(sp.Matrix.vstack(sp.Matrix.hstack(self.R, self.P), sp.Matrix.hstack(self.P.T, self.S)))
 
     @cached_property
     def power_balance(self) -> dict[str, sp.Expr]:
@@ -402,7 +344,7 @@ class PHSystem:
         dissipated = (z.T * self.dissipation_matrix * z)[0, 0] if len(z) else sp.Integer(0)
         supplied = (self.port_output.T * sp.Matrix(len(self.u), 1, self.u))[0, 0] if self.inputs else sp.Integer(0)
         dHdt = (self.grad_H.T * self.dynamics)[0, 0] if self.states else sp.Integer(0)
-        return {"dHdt": dHdt, "dissipated": dissipated, "supplied": supplied}
+        return FrozenDict({"dHdt": dHdt, "dissipated": dissipated, "supplied": supplied})
 
     def dissipator_powers(self) -> dict[str, sp.Expr]:
         """Power dissipated by each resistive element, as expressions of state and input."""
@@ -566,6 +508,7 @@ class PHSystem:
         h = hashlib.sha256()
         for part in (
             self.name, [s.name for s in self.states], [i.name for i in self.inputs], self.param_names,
+            [i.output for i in self.inputs],  # measured outputs refer to port outputs by these names
             [sp.srepr(t.expr) for t in self.energy_terms], *(srepr_matrix(M) for M in (self.J, self.R, self.G, self.P,
                                                                                       self.S, self.N)),
             [(m.name, sp.srepr(m.expr)) for m in self.measured],

@@ -184,7 +184,7 @@ def _series_with_storage(system, where, state: StateInfo, energy: sp.Expr, condu
     T[:, :n] = sp.eye(n)
     T[i, n] = 1
     J = T.T * system.J * T
-    R = T.T * system.R * T
+    R = sp.Matrix(T.T * system.R * T)  # a new matrix: the model's own R is immutable
     R[n, n] += conductance
     G = T.T * system.G if m else sp.zeros(n + 1, 0)
     P = T.T * system.P if m else sp.zeros(n + 1, 0)

@@ -42,6 +42,7 @@ def _dense_hash(s) -> str:
     h = hashlib.sha256()
     for part in (
         s.name, [x.name for x in s.states], [i.name for i in s.inputs], s.param_names,
+        [i.output for i in s.inputs],
         [sp.srepr(t.expr) for t in s.energy_terms], *(sp.srepr(M) for M in (s.J, s.R, s.G, s.P, s.S, s.N)),
         [(m.name, sp.srepr(m.expr)) for m in s.measured], [(cd.label, sp.srepr(cd.expr)) for cd in s.conditions],
         [(label, sorted((k, sp.srepr(v)) for k, v in entries.items())) for label, entries in s.dissipators],
