@@ -208,7 +208,8 @@ class Simulator:
             [sx["xdot"], sx["supplied"], sx["dissipated"], sx["dissipators"]], subs_in, [x, uu, pp]
         )
         ode = h * xdot / self.scale
-        quad = h * ca.vertcat(supplied, dissipated, dparts) if self.energy else ca.SX(0, 1)
+        # dense: a lossless model's dissipated power is a structural zero, which CVODES refuses as a sparse output
+        quad = ca.densify(h * ca.vertcat(supplied, dissipated, dparts)) if self.energy else ca.SX(0, 1)
         P = ca.vertcat(pp, a, h, *extra)
         empty = ca.SX(0, 1)
         dae = ca.Function(f"{self.f.rhs.name()}_dae", [tau, z, empty, P, empty], [ode, empty, quad, empty],
