@@ -20,6 +20,11 @@ RC = "systems.examples:rc_circuit"
 RC_COLUMNS = ["t [s]", "C.Q [C]", "U [V]", "U.i [A]", "v_C [V]", "H [J]", "dissipated [W]", "supplied [W]"]
 
 
+def rc_columns(law: str) -> list[str]:
+    """The header of ``phs simulate --out`` for the RC circuit driven by ``law`` (written after the input's unit)."""
+    return [f"U [V] {{{law}}}" if c == "U [V]" else c for c in RC_COLUMNS]
+
+
 def csv_header(path) -> list[str]:
     with open(path, newline="") as fh:
         return next(csv.reader(fh))
@@ -48,7 +53,7 @@ def test_version(capsys):
 def test_step_response_matches_analytic_rc(tmp_path):
     assert simulate(tmp_path, "--input", "step(1.0)", "--rtol", "1e-10", "--atol", "1e-10") == 0
     header, data = read_csv(tmp_path / "res.csv")
-    assert csv_header(tmp_path / "res.csv") == RC_COLUMNS
+    assert csv_header(tmp_path / "res.csv") == rc_columns("step(1.0)")
     t, q = data[:, 0], data[:, header.index("C.Q")]
     np.testing.assert_allclose(t, np.arange(0, 5e-3 + 0.5e-4, 1e-4), rtol=0, atol=1e-15)
     assert len(t) == 51
@@ -64,7 +69,7 @@ def test_square_input_with_plot_and_json(tmp_path):
                   "--json", str(tmp_path / "summary.json"), t_end="0.04", dt="1e-3")
     assert rc == 0
     header, data = read_csv(tmp_path / "res.csv")
-    assert csv_header(tmp_path / "res.csv") == RC_COLUMNS
+    assert csv_header(tmp_path / "res.csv") == rc_columns("square(1.0, 50)")
     u = data[:, header.index("U")]
     assert set(np.round(u, 12)) == {1.0, -1.0}
     assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
