@@ -190,7 +190,7 @@ def _case_seed(effect, seed, validation):
 def simulate_truth(tr: Truth, t, U) -> dict:
     """Noise-free ``position`` and ``current`` of a truth driven by the command ``U`` sampled at ``t``.
 
-    The command is linearly interpolated between samples, as identification reads a recording;
+    The command is linearly interpolated between samples, as the recordings declare (``holds``);
     amplifier effects (``tr.applied``) transform it first.
 
     Examples
@@ -257,7 +257,7 @@ def generate(effect: str, *, seconds: float = 20.0, seed: int = 0, validation: b
     noisy = {ch: clean[ch] + noise_std[ch] * rng.standard_normal(len(t)) for ch in CHANNELS}
     split = "validation" if validation else "train"
     rec = Recording.from_arrays(t, {"U": U, **noisy}, source=f"concealed_effects:{effect}:{split}",
-                                units={"U": "V", "position": "m", "current": "A"})
+                                units={"U": "V", "position": "m", "current": "A"}, holds={"U": "linear"})
     info = {"effect": effect, "form": tr.form, "parameters": dict(tr.parameters), "base_parameters": dict(BASE),
             "nominal_free": list(NOMINAL_FREE), "program": PROGRAMS.get(effect, "steps"), "noise_std": noise_std,
             "clean": clean, "seed": int(seed), "seconds": float(seconds), "validation": bool(validation), "size": float(size)}
@@ -342,7 +342,8 @@ def table(results) -> str:
 
 # -- files ---------------------------------------------------------------------------------------------------------------
 def write_csv(recording, path) -> None:
-    """Write a recording as CSV (columns ``t`` and its signals) atomically.
+    """Write a recording as CSV (columns ``t`` and its signals, with how each input was read between samples:
+    ``U {linear}``) atomically.
 
     Examples
     --------
@@ -356,7 +357,8 @@ def write_csv(recording, path) -> None:
     """
     from codegen.results import write_csv_atomic
 
-    write_csv_atomic(path, ["t"] + recording.names, np.column_stack([recording.t] + [recording[n] for n in recording.names]))
+    names = [f"{n} {{{recording.holds[n]}}}" if isinstance(recording.holds.get(n), str) else n for n in recording.names]
+    write_csv_atomic(path, ["t"] + names, np.column_stack([recording.t] + [recording[n] for n in recording.names]))
 
 
 def _plain(obj):

@@ -179,7 +179,7 @@ def generate(effect: str, *, seconds: float = 20.0, seed: int = 0, validation: b
     noisy = {ch: clean[ch] + noise_std[ch] * rng.standard_normal(len(t)) for ch in CHANNELS}
     split = "validation" if validation else "train"
     rec = Recording.from_arrays(t, {"U": U, **noisy}, source=f"concealed_novel:{effect}:{split}",
-                                units={"U": "V", "position": "m", "current": "A"})
+                                units={"U": "V", "position": "m", "current": "A"}, holds={"U": "linear"})
     nature, state = NATURE[effect]
     return rec, {"effect": effect, "form": tr.form, "parameters": dict(tr.parameters), "nature": nature, "state": state,
                  "input": INPUT.get(effect, ""),

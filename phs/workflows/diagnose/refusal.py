@@ -129,6 +129,8 @@ def _checks(system, rec, ch: str, reasons: list, figs: dict) -> list[str]:
     if "scale" in reasons:
         out.append(f"the unit of column {col!r} against the model's {unit!r} and those of the input columns ({inputs}) "
                    "(--scale COLUMN=FROM:TO; a unit prefix is a factor 10^3)")
+        out.append("how the input columns are read between samples (held or straight lines: --hold COLUMN=zoh|linear; "
+                   "a step read where the source ramped drives spikes through a derivative)")
     if "shape" in reasons:
         out.append(f"the --map mapping (is {col!r} the model's {ch!r}, are the inputs {inputs} the right columns?)")
         out.append("the time column (--time) and its unit (s)")
