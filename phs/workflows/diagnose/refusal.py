@@ -44,8 +44,8 @@ physics itself (a leak), and the diagnosis goes on."""
 def channel_figures(recorded, simulated) -> dict:
     """Figures of one channel of a fitted model on one window: ``correlation`` of the simulated with the
     recorded values (NaN when either is constant), ``spread_ratio`` (standard deviation recorded /
-    simulated; ``inf`` when the simulation is constant) and ``still`` (the simulation stays at rest,
-    :data:`STILL`).
+    simulated; ``inf`` when the simulation is constant, NaN when the recording is: a flat channel holds
+    nothing to describe) and ``still`` (the simulation stays at rest, :data:`STILL`).
 
     Examples
     --------
@@ -59,7 +59,7 @@ def channel_figures(recorded, simulated) -> dict:
     rms = float(np.sqrt(np.mean(s**2)))
     still = ss <= STILL * rms or rms == 0.0
     corr = float(np.corrcoef(y, s)[0, 1]) if sy > 0 and ss > 0 and not still else math.nan
-    ratio = sy / ss if ss > 0 and not still else math.inf
+    ratio = math.nan if sy == 0 else (sy / ss if ss > 0 and not still else math.inf)
     return {"correlation": corr, "spread_ratio": ratio, "still": bool(still)}
 
 
@@ -96,6 +96,8 @@ def cannot_describe(figures: dict) -> list[str]:
     >>> cannot_describe(channel_figures(-y, 0.5 * y))           # sign flipped
     ['shape']
     >>> cannot_describe(channel_figures(y, np.full_like(y, 2.0)))   # a model at rest
+    []
+    >>> cannot_describe(channel_figures(np.zeros_like(y), y))      # a flat recording: nothing to describe
     []
     """
     if figures["still"]:
