@@ -84,6 +84,15 @@ class PHSystem:
     ...                J=[[0, 1], [-1, 0]], R=sp.zeros(2, 2), params=[k, m])
     >>> osc.dynamics.T
     Matrix([[p/m, -k*q]])
+
+    A model is a value: nothing in it can be changed in place (a change builds a new one)
+
+    >>> osc.R[0, 0] = 1
+    Traceback (most recent call last):
+    ...
+    TypeError: Cannot set values of <class 'sympy.matrices.immutable.ImmutableDenseMatrix'>
+    >>> osc.with_params(k=3.0).param("k").value, osc.param("k").value
+    (3.0, 2.0)
     """
 
     def __init__(
