@@ -54,7 +54,6 @@ BIG = {  # seconds to tens of seconds to build: slow suite only
     "hasel_platform": (lambda: hasel_platform(1), None, None, None),
     "hydrogel_arm": (hydrogel_arm, None, None, None),
 }
-METHOD = {"duffing": "discrete_gradient"}  # CVODES refuses a model without inputs ("quad is sparse")
 CASES = [pytest.param(k, v, id=k) for k, v in SMALL.items()] + [
     pytest.param(k, v, id=k, marks=pytest.mark.slow) for k, v in BIG.items()]
 
@@ -68,8 +67,7 @@ def _reference(name: str):
     """A model built once and never touched, and its run (simulated before any edit is tried elsewhere)."""
     build, u, x0, t_end = {**SMALL, **BIG}[name]
     ref = build()
-    run = None if t_end is None else simulate(ref, np.linspace(0.0, t_end, 21), u=u, x0=x0,
-                                              method=METHOD.get(name, "cvodes"))
+    run = None if t_end is None else simulate(ref, np.linspace(0.0, t_end, 21), u=u, x0=x0)
     return ref, run
 
 
@@ -138,7 +136,7 @@ def test_every_edit_in_place_raises_and_changes_nothing(name, case):
     assert all(st.range == r.range for st, r in zip(s.states, ref.states, strict=True))
     if run is not None:  # the same generated functions, inputs and grid: bitwise the same run
         _, u, x0, t_end = case
-        again = simulate(s, np.linspace(0.0, t_end, 21), u=u, x0=x0, method=METHOD.get(name, "cvodes"))
+        again = simulate(s, np.linspace(0.0, t_end, 21), u=u, x0=x0)
         np.testing.assert_array_equal(again.x, run.x)
 
 
