@@ -202,6 +202,9 @@ def plan_segments(sigs, t, cuts=()):
     (:meth:`phs.signals.Sampled.lines`: the holds and ramps between the sines of a recording), whose ends
     are breakpoints and over which it is the line again.
 
+    The first and last samples of a sampled input are breakpoints too: before and after them it holds its
+    first and last values, a kink where its samples start late or stop early within the grid.
+
     ``cuts``: further times at which a segment must end (the windows of a multiple-shooting fit).
 
     Returns ``(segs, slots)``: ``segs`` a list of ``(a, b, choice)`` with ``choice[j]`` the index of
@@ -219,6 +222,7 @@ def plan_segments(sigs, t, cuts=()):
     bps = sorted({float(b) for s in sigs if not isinstance(s, Sampled) for b in s.breakpoints(t0, t1)}
                  | {float(b) for s in sigs if isinstance(s, Sampled) and baked(s) is None for b in s.kinks()}
                  | {float(b) for s in sigs if isinstance(s, Sampled) for b in s.lines().reshape(-1)}
+                 | {float(b) for s in sigs if isinstance(s, Sampled) for b in s.arrays[0][[0, -1]]}
                  | {float(b) for b in cuts})
     edges = [t0] + [b for b in bps if t0 < b < t1] + [t1]
     slots: list[list] = [[] for _ in sigs]  # per input: list of (key, template, n_constants)

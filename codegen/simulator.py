@@ -180,12 +180,14 @@ class Simulator:
         tt = a + h * tau
         extra, uexpr = [], []
         layout = []
+        kinds = []  # how each sampled input is interpolated: part of what a compiled library holds
         for j in range(nu):
             if sampled[j] is not None:
                 grid, values = sampled[j][:2]
                 # in a smooth window a cubic spline through the same samples: without a kink at every
                 # sample CVODES steps across samples (5-15 times fewer steps on sines sampled at 1 kHz)
                 kind = interpolation(len(grid), max_step)
+                kinds.append(kind)
                 interp = _interpolant(grid, values, kind, digests[j])
                 uexpr.append(interp(tt))
                 layout.append(("sampled", ()))
@@ -217,7 +219,9 @@ class Simulator:
         if self.compile:
             from codegen.compile import compiled
 
-            dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[2:]}|{self.scale.tolist()}")
+            # the key names the interpolants' kinds: a spline window and a linear one of the same samples are two libraries
+            dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[2:]}|{self.scale.tolist()}"
+                                              + (f"|{kinds}" if kinds else ""))
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
                 "disable_internal_warnings": True, "show_eval_warnings": False}  # failures are reported as PHS errors instead
         if any(g is not None for g in sampled):
