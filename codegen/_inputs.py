@@ -10,14 +10,13 @@ inputs of a segment from its template and constants.
 
 from __future__ import annotations
 
-import warnings
 from numbers import Real
 
 import numpy as np
 import sympy as sp
 
 from codegen._interpolants import _interpolant, interpolation, sampled_digest
-from phs.errors import InputDataError, InputHoldWarning
+from phs.errors import InputDataError
 from phs.params import TIME
 from phs.signals import Constant, Piecewise, Sampled, Signal, as_signal
 
@@ -26,7 +25,8 @@ def input_signals(system, u, t) -> list[Signal]:
     """One signal per input of ``system`` from a user's specification ``u`` on the grid ``t``.
 
     ``u`` is a dict by input name (a bare value when the system has one input); missing inputs are
-    zero.  Arrays are samples on ``t``; a callable of ``t`` is turned into an expression when sympy
+    zero.  Arrays are samples on ``t``, read as a continuous signal (``Sampled(t, values, hold="zoh")`` says
+    they were held); a callable of ``t`` is turned into an expression when sympy
     can evaluate it, else sampled on ``t``; samples held by zero-order hold become a piecewise
     constant signal (its jumps are breakpoints).
 
@@ -60,17 +60,13 @@ def input_signals(system, u, t) -> list[Signal]:
             arr = np.asarray(spec, dtype=float)
             if arr.shape != t.shape:
                 raise InputDataError(f"input {name!r}: array of shape {arr.shape} does not match the time grid {t.shape}")
-            spec = Sampled(tuple(t), tuple(arr), hold="auto")
+            spec = Sampled(tuple(t), tuple(arr))
         elif callable(spec) and not isinstance(spec, Signal):
             try:
                 e = sp.sympify(spec(TIME))
                 spec = as_signal(e)
             except Exception:  # a numpy-only callable: sample it on the grid
-                spec = Sampled(tuple(t), tuple(np.asarray(spec(t), dtype=float)), hold="auto")
-        if isinstance(spec, Sampled) and spec.held_ambiguous:
-            warnings.warn(f"input {name!r}: its samples change in isolated jumps between short flat stretches: read as "
-                          "held between samples (zero-order hold); pass Sampled(times, values, hold='linear') if they "
-                          "sample a continuous signal", InputHoldWarning, stacklevel=3)
+                spec = Sampled(tuple(t), tuple(np.asarray(spec(t), dtype=float)))
         if isinstance(spec, Sampled) and spec.hold == "zoh":  # held samples jump: restart at each change
             spec = held_signal(spec)
         try:

@@ -95,9 +95,9 @@ class ParameterRangeWarning(UserWarning):
 
 
 class InputHoldWarning(UserWarning):
-    """A sampled input read as held between samples (zero-order hold) where that reading is ambiguous: its samples
-    change in isolated jumps, as a DAC's command does, but between short flat stretches, as a slowly varying signal
-    quantized by a converter does too (:func:`phs.kinks.held_between_samples`).  Declaring the reading silences it.
+    """A recorded input whose samples look held between samples (isolated jumps between flat stretches, as a DAC's
+    command: :func:`phs.kinks.held_between_samples`) is read as a continuous signal because nothing declared how it
+    behaves between samples.  Declaring it (``holds=``, ``--hold``, a header ``U [V] {zoh}``) silences it.
 
     Examples
     --------

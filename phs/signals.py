@@ -374,7 +374,8 @@ class Sampled(Signal):
     :func:`codegen._grid.step_windows`); ``"zoh"``, a command held by a DAC (sample ``k``'s value from ``t[k]`` to
     ``t[k+1]``); ``"auto"``, held when the samples look held (:func:`phs.kinks.held_between_samples`: isolated
     jumps between flat stretches), else linear, resolved when the signal is made (``held_ambiguous`` then says
-    whether that reading was ambiguous).
+    whether that reading was ambiguous).  Recordings read an undeclared input as ``"linear"``
+    (:meth:`phs.workflows.recording.Recording.input_signal`).
 
     Examples
     --------

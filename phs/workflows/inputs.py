@@ -110,7 +110,7 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
         Times of the rows.
     signals : dict of str -> Signal
         One signal per input: its declared law, or its samples held or interpolated as the header's annotation
-        says (:mod:`phs.workflows.between`), else as they look (``hold="auto"``).
+        says (:mod:`phs.workflows.between`), else interpolated as a continuous signal.
 
     Raises
     ------
@@ -175,7 +175,7 @@ def read_input_csv(path, system, time_column: str = "t", mapping: dict | None = 
     signals = {}
     for u, c in wanted.items():  # as the header says the input behaves between samples, else as its samples look
         v = _column(path, header, rows, c)
-        hold = hold_of(notes.get(c, "auto"), path, c)
+        hold = hold_of(notes.get(c, "linear"), path, c)
         if isinstance(hold, Signal):
             check_law(hold, notes[c], t, v, path, c, lambda k: f"row {rows[k][0]}")
             signals[u] = hold if factor.get(c, 1.0) == 1.0 else factor[c] * hold

@@ -8,11 +8,13 @@ file, the column and the row (spreadsheet numbering: the header is row 1).
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from phs.errors import InputDataError
+from phs.errors import InputDataError, InputHoldWarning
+from phs.kinks import held_between_samples
 from phs.signals import Sampled, Signal
 from phs.workflows.between import check_law, header_annotations, hold_of
 from phs.workflows.conversion import column_factor, model_units, unit_factor
@@ -71,9 +73,9 @@ class Recording:
     """How each input behaves between its samples, where declared: ``"zoh"`` (held by a DAC from each sample to
     the next), ``"linear"`` (a continuous signal sampled by a sensor) or a :class:`~phs.signals.Signal`, the law the
     samples were taken from (a header annotation ``U [V] {square(1500, 3)}``, as ``phs simulate --out`` writes it:
-    the run replays exactly, edges between the samples included).  An input not declared is read by its samples
-    (:func:`phs.kinks.held_between_samples`): held when it changes in isolated jumps between flat stretches, else
-    continuous (:meth:`input_signal`)."""
+    the run replays exactly, edges between the samples included).  An input not declared is read as a continuous
+    signal (:meth:`input_signal`); :meth:`check_for` warns (:class:`~phs.errors.InputHoldWarning`) when its samples
+    look held (:func:`phs.kinks.held_between_samples`)."""
 
     # -- construction ------------------------------------------------------------------
     @classmethod
@@ -386,8 +388,8 @@ class Recording:
     def input_signal(self, name: str) -> Signal:
         """The signal ``name`` as a simulation reads it: its course between the samples (:attr:`between`), its
         declared law, or its samples (:class:`~phs.signals.Sampled`) held or interpolated as declared in
-        :attr:`holds` or, undeclared, as they look (``hold="auto"``: held when they change in isolated jumps between
-        flat stretches, as a DAC's command does).
+        :attr:`holds`, by default interpolated as a continuous signal (:meth:`check_for` warns when such samples
+        look held).
 
         Examples
         --------
@@ -397,14 +399,14 @@ class Recording:
         >>> late = Recording(rec.t, rec.signals, between={"U": (np.array([0.0, 1.25, 2.25]), np.array([0.0, 0.0, 1.0]))})
         >>> float(late.input_signal("U")(1.5)), float(late["U"][2])    # the course delayed by 0.25; the samples kept
         (0.25, 1.0)
-        >>> steps = Recording.from_arrays(np.arange(40) * 0.1, {"U": np.repeat([0.0, 1.0], 20)})
+        >>> steps = Recording.from_arrays(np.arange(40) * 0.1, {"U": np.repeat([0.0, 1.0], 20)}, holds={"U": "zoh"})
         >>> steps.input_signal("U").hold, float(steps.input_signal("U")(1.95))   # held: the step at t = 2.0 exactly
         ('zoh', 0.0)
         """
         if name in self.between:
             times, values = self.between[name]
             return Sampled(tuple(np.asarray(times, float)), tuple(np.asarray(values, float)))
-        hold = self.holds.get(name, "auto")
+        hold = self.holds.get(name, "linear")
         if isinstance(hold, Signal):
             return hold
         return Sampled(tuple(self.t), tuple(self[name]), hold=hold)
@@ -449,5 +451,12 @@ class Recording:
         if not outs:
             raise InputDataError(f"{self.source}: none of the signals {self.names} is a measured output of "
                                  f"{system.name!r} ({', '.join(system.measured_names)})")
+        for u in system.input_names:  # read as continuous unless declared: say so where the samples look held
+            if u not in self.holds and u not in self.between and held_between_samples(self.signals[u])[0]:
+                c = self.columns.get(u, u)
+                warnings.warn(f"{self.source}: input {c!r} changes in isolated jumps between flat stretches, as a command "
+                              "held by a DAC does; it is read as a continuous signal (straight lines between samples); "
+                              f"if a DAC held it, declare it: holds={{{u!r}: 'zoh'}}, --hold {c}=zoh or a header "
+                              f"'{c} [unit] {{zoh}}'", InputHoldWarning, stacklevel=2)
         return system.input_names, outs
 

@@ -59,10 +59,7 @@ def test_parameters_recovered_within_their_intervals(recovery):
 
 def test_validation_fit_and_training_fit(recovery):
     fit, _ = recovery
-    # the validation square jumps by 10 kV at its held edges and rings: its tip fit moves by points when K_b and b
-    # move by half a percent (noise draws 1, 3, 7 of the training data: 95.3-97.9 %, parameters inside their
-    # intervals); the fit of the truth itself is 100 %
-    assert fit.validation_fit_percent["tip"] >= 95.0
+    assert fit.validation_fit_percent["tip"] >= 98.0
     # training fit is limited by the 1 % noise: 100 (1 - noise_std / signal_std) ~ 96-97 %
     assert fit.fit_percent["tip"] > 90.0
     assert fit.log_scaled == ["C1", "R2"]  # parameters whose ranges span decades

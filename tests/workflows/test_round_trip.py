@@ -5,8 +5,8 @@
 :mod:`phs.workflows.between`), so the fit replays the run itself, edges between the samples included.  A noise-free
 file must then fit at >= 99.9 % with every parameter back at its truth, and the diagnosis must find nothing missing.
 The grids are deliberately odd (steps of 1.3 ms and 0.77 ms, lengths not round, time from 0), so that edges fall
-between samples.  A file whose input carries no law is read as its samples look (held steps, interpolated curves):
-:func:`test_a_file_without_laws_fits_held_steps_exactly` covers the held steps that fall on the samples.
+between samples.  A file whose input carries no law is read as a continuous signal unless it declares its input
+held: :func:`test_a_daq_file_fits_its_held_steps_exactly_once_declared`.
 
 The default suite runs the small systems at one rate; ``-m slow`` every listed system at three rates.
 """
@@ -100,9 +100,14 @@ def test_round_trip_every_system_law_and_rate(tmp_path, system, law_name, dt_sha
     _round_trip(tmp_path, {**SYSTEMS, **SLOW_SYSTEMS}[system], law_name, dt_share, diagnose=(law_name == "square"))
 
 
-def test_a_file_without_laws_fits_held_steps_exactly(tmp_path):
-    """A DAQ's file: the command held between samples, no annotation; its steps are read as held."""
+def test_a_daq_file_fits_its_held_steps_exactly_once_declared(tmp_path):
+    """A DAQ's file: the command held between samples.  Undeclared, it is read as a continuous signal (straight lines
+    between samples) and a warning says that its samples look held; declared held (a header ``{zoh}`` or
+    ``holds=``), the steps jump at the samples and the fit is exact."""
+    import warnings
+
     from codegen import simulate
+    from phs.errors import InputHoldWarning
     from phs.signals import Sampled
     from phs.workflows.identify import identify
     from phs.workflows.recording import Recording
@@ -113,14 +118,20 @@ def test_a_file_without_laws_fits_held_steps_exactly(tmp_path):
     u = np.repeat(rng.choice([-1.0, 1.0], len(t) // 37 + 1), 37)[: len(t)]  # PRBS held 37 samples
     truth = mass_spring_damper().with_params({"k.K": 5.0, "b.b": 0.6})
     y = simulate(truth, t, u={"F": Sampled(tuple(t), tuple(u), hold="zoh")})["position"]
-    path = tmp_path / "daq.csv"
-    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t,F,position", comments="", fmt="%.17g")
-    rec = Recording.from_csv(path)
-    assert rec.input_signal("F").hold == "zoh"
-    fit = identify(mass_spring_damper(), rec, ["k.K", "b.b"])
+    for name, header in [("daq.csv", "t,F,position"), ("declared.csv", 't,"F [N] {zoh}",position')]:
+        np.savetxt(tmp_path / name, np.column_stack([t, u, y]), delimiter=",", header=header, comments="", fmt="%.17g")
+    declared = Recording.from_csv(tmp_path / "declared.csv")
+    assert declared.input_signal("F").hold == "zoh"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InputHoldWarning)  # declared: nothing to warn about
+        fit = identify(mass_spring_damper(), declared, ["k.K", "b.b"])
     assert fit.values["k.K"] == pytest.approx(5.0, rel=1e-6) and fit.values["b.b"] == pytest.approx(0.6, rel=1e-6)
-    # read as a continuous signal instead, the 1-sample ramps are a different input: the fit is no longer exact
-    ramp = identify(mass_spring_damper(), Recording.from_csv(path, holds={"F": "linear"}), ["k.K", "b.b"])
+    option = identify(mass_spring_damper(), Recording.from_csv(tmp_path / "daq.csv", holds={"F": "zoh"}), ["k.K", "b.b"])
+    assert option.values["b.b"] == pytest.approx(fit.values["b.b"], rel=1e-9)
+    # undeclared: read as straight lines between samples, with a warning naming the column and the declaration;
+    # the 1-sample ramps are another input than the held steps, so the fit is no longer exact
+    with pytest.warns(InputHoldWarning, match=r"input 'F' changes in isolated jumps.*--hold F=zoh"):
+        ramp = identify(mass_spring_damper(), Recording.from_csv(tmp_path / "daq.csv"), ["k.K", "b.b"])
     assert abs(ramp.values["b.b"] / 0.6 - 1) > 1e-4
 
 
