@@ -75,9 +75,9 @@ raw = np.genfromtxt(DATA, delimiter=",", skip_header=1, usecols=(0, 1, 2, 3))
 n = 512 if args.quick else len(raw)
 t = np.arange(n) * TS
 train = Recording.from_arrays(t, {"u": raw[:n, 0], "level2": raw[:n, 2]}, source="dataBenchmark.csv (estimation)",
-                              units={"u": "V", "level2": "V"})
+                              units={"u": "V"})  # the level sensor reads volts, which the model takes as its level
 val = Recording.from_arrays(t, {"u": raw[:n, 1], "level2": raw[:n, 3]}, source="dataBenchmark.csv (validation)",
-                            units={"u": "V", "level2": "V"})
+                            units={"u": "V"})
 print(f"lower tank at the sensor's limit (10 V): {int(np.sum(raw[:n, 2] >= 10.0))} estimation samples, "
       f"{int(np.sum(raw[:n, 3] >= 10.0))} validation samples")
 
