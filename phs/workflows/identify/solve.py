@@ -16,7 +16,6 @@ import scipy.optimize
 from codegen._solver_errors import in_words
 from codegen.simulator import Simulator, simulate
 from phs.errors import InputDataError, ParameterError, PHSError, SimulationError
-from phs.signals import Sampled
 from phs.workflows.identify.coordinates import _bounds, _channel_weights, _log_scaled, ml_weights
 from phs.workflows.identify.result import IdentificationResult, _uncertainty, relative_factor
 from phs.workflows.identify.scoring import _simulate_outputs, nrmse_fit
@@ -165,7 +164,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     z0 += [x0v[system.state_names.index(n)] / scale[system.state_names.index(n)] for n in estimate_x0]
     if len(prob.window_starts):
         # window states start on the trajectory of the initial parameters
-        u_sig = {n: Sampled(tuple(recording.t), tuple(recording[n])) for n in system.input_names}
+        u_sig = {n: recording.input_signal(n) for n in system.input_names}
         xs = simulate(system, recording.t, u=u_sig, x0=x0v).x[prob.window_starts] / scale
         z0 += list(xs.reshape(-1))  # column-major vec of (nx, K-1): window by window
         lo += [-np.inf] * xs.size  # declared ranges guide checks and sampling; they do not bound trajectories
