@@ -29,7 +29,6 @@ import numpy as np
 import sympy as sp
 from hypothesis import strategies as st
 
-from phs.kinks import held_between_samples
 from phs.signals import Sampled
 
 RATES = (50.0, 100.0, 250.0, 500.0, 1000.0, 2000.0, 5000.0, 10000.0, 20000.0, 44100.0, 50000.0)
@@ -39,10 +38,10 @@ KINDS = ("rest", "step", "ramp", "tanh_square", "chirp", "multisine", "prbs", "n
 """The kinds of stretch an input is made of."""
 
 DELIVERIES = ("grid", "grid_linear", "own_converter", "held")
-"""How an input reaches the simulation: its samples on the grid as an array (held between samples when they look
-held, :func:`phs.kinks.held_between_samples`, else straight lines: the documented reading of an array), the same
-declared continuous (``Sampled(..., hold="linear")``), the samples of its own converter (another rate and offset,
-straight lines between them) or held by a DAC (``hold="zoh"``)."""
+"""How an input reaches the simulation: its samples on the grid as an array (an undeclared reading: straight lines
+between samples, as :meth:`codegen.simulator.Simulator.run` and :meth:`phs.workflows.recording.Recording.input_signal`
+document it), the same declared continuous (``Sampled(..., hold="linear")``), the samples of its own converter
+(another rate and offset, straight lines between them) or held by a DAC (``hold="zoh"``)."""
 
 
 _UNIT = st.integers(0, 2**20).map(lambda k: k / 2**20)  # no subnormal levels: a converter's values have a resolution
@@ -285,8 +284,6 @@ def lab_inputs(draw, t: np.ndarray, amplitude: float, deliveries=DELIVERIES, kin
         m = max(2, int(np.floor(span / dti)) + 2)
         times = first + np.arange(m) * dti
     values, names = draw(waveforms(len(times), float(np.median(np.diff(times))), amplitude, kinds))
-    if delivery == "grid" and held_between_samples(values)[0]:
-        hold = "zoh"
     return LabInput(times, values, hold, delivery, names)
 
 
