@@ -1,11 +1,13 @@
 """A fit whose cost no longer falls at the resolution of its integration stops at its best point
 (``phs.workflows.identify.solve.STALL``) instead of shrinking its trust region to scipy's step tolerance.
 
-The residual gets a deterministic perturbation of 1e-4 of its RMS at every trial point (seeded by the
+The residual gets a deterministic perturbation of 3e-4 of its RMS at every trial point (seeded by the
 point: a stand-in for the integration's error, which moves with the parameters): near the optimum no
 step lowers the cost reliably.  The fit stops ``stalled`` at the lowest cost it saw, at the same point
 as with the rule off (scipy's step tolerance then ends it, after more evaluations: measured 9 against
-12), and near the truth (1 %: the recording's noise)."""
+14), and near the truth (1 %: the recording's noise).  Which trial points a fit visits moves with the integration's
+own segments, and with them whether a smaller perturbation happens to stall it (1e-4 stalled before the fit read
+its inputs through the simulator's plan, not after): 3e-4 is well above the integration error of rtol 1e-9."""
 
 import zlib
 
@@ -25,7 +27,7 @@ def noisy_cost(monkeypatch):
     def perturbed(self, z):
         r = np.asarray(res(self, z), dtype=float)
         seed = zlib.crc32(np.asarray(z, dtype=float).tobytes())
-        return r + 1e-4 * np.linalg.norm(r) / np.sqrt(r.size) * np.random.default_rng(seed).standard_normal(r.size)
+        return r + 3e-4 * np.linalg.norm(r) / np.sqrt(r.size) * np.random.default_rng(seed).standard_normal(r.size)
 
     monkeypatch.setattr(sensitivities._Problem, "res", perturbed)
 
