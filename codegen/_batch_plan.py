@@ -15,8 +15,9 @@ import hashlib
 import casadi as ca
 import numpy as np
 
-from codegen._inputs import baked, input_signals, plan_segments, run_sampled
-from codegen._output import check_covered, energy_columns, output_runs
+from codegen._inputs import input_signals, run_sampled
+from codegen._output import check_covered, energy_columns
+from codegen._plan import plan_for
 
 
 @dataclasses.dataclass
@@ -61,18 +62,16 @@ def plan_shape(sim, t: np.ndarray, u) -> Shape:
     >>> shape.t_off.tolist()
     [0.00025]
     """
-    sigs = input_signals(sim.system, u, t)
-    segs, slots = plan_segments(sigs, t)
-    sampled = [baked(sg) for sg in sigs]
-    nt, nu = len(t), len(sigs)
-    U = np.zeros((nt, nu))
+    plan = plan_for(t, input_signals(sim.system, u, t))  # the simulator's own plan, time counted from t[0]
+    nt, nu = len(t), len(plan.sigs)
+    U = plan.U.copy()
     U_check = np.zeros((nt, nu))  # the initial state is checked with zero input, as the simulator does
     runs, steps, cs, t_off, u_off, key = [], [], [], [], [], []
-    for r in output_runs(t, sigs, segs, lambda choice, times, ms: sim._eval_inputs(sigs, slots, choice, times, ms), U):
-        F, layout = sim._integrator(r.n, slots, run_sampled(sampled, r.choice), r.max_step)
+    for r in plan.runs:
+        F, layout = sim._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step)
         c = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
         r.store(U_check, r.u)
-        t_off.extend(r.times[~r.on])
+        t_off.extend(r.times[~r.on] + plan.origin)
         u_off.extend(r.u[~r.on])
         runs.append(r)
         steps.append(Step(F, len(c), r.on, r.j[r.on]))

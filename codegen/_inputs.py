@@ -10,6 +10,7 @@ inputs of a segment from its template and constants.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from numbers import Real
 
 import numpy as np
@@ -91,6 +92,51 @@ def held_signal(sg: Sampled) -> Signal:
     if not len(change):
         return Constant(float(vals[0]))
     return Piecewise(tuple(tt[change].tolist()), tuple(vals[change].tolist()), float(vals[0]))
+
+
+@dataclass(frozen=True, eq=False)
+class Shifted(Signal):
+    """``inner`` read on a time axis whose zero is ``origin``: ``Shifted(inner, origin)(t) = inner(t + origin)``.
+
+    A simulation runs on the time from its grid's start (:func:`shifted`), so that a recording stamped at
+    t = 1.7e9 s (a logger's epoch time) keeps its resolution: in absolute time a straight line's constants
+    cancel to a few digits and CVODES cannot resolve a millisecond step at 1e7 s.
+
+    Examples
+    --------
+    >>> from phs.signals import step
+    >>> sg = Shifted(step(1.0, at=1000.5), 1000.0)
+    >>> sg.breakpoints(0.0, 1.0).tolist(), float(sg(0.25)), float(sg(0.75))
+    ([0.5], 0.0, 1.0)
+    """
+
+    inner: Signal
+    origin: float
+
+    def breakpoints(self, t0, t1) -> np.ndarray:
+        return np.asarray(self.inner.breakpoints(t0 + self.origin, t1 + self.origin), dtype=float) - self.origin
+
+    def expr_on(self, a, b) -> sp.Expr:
+        return sp.sympify(self.inner.expr_on(a + self.origin, b + self.origin)).xreplace({TIME: TIME + self.origin})
+
+    def __call__(self, tt):
+        return self.inner(np.asarray(tt, dtype=float) + self.origin)
+
+
+def shifted(sg: Signal, origin: float) -> Signal:
+    """The signal ``sg`` on a time axis whose zero is ``origin`` (:class:`Shifted`): samples move with their times
+    (their kinks, straight stretches and interpolants stay exact), constants stay.
+
+    Examples
+    --------
+    >>> shifted(Sampled((10.0, 11.0, 12.0), (0.0, 1.0, 0.0)), 10.0).times
+    (0.0, 1.0, 2.0)
+    """
+    if origin == 0.0 or isinstance(sg, Constant):
+        return sg
+    if isinstance(sg, Sampled):
+        return Sampled(tuple((sg.arrays[0] - origin).tolist()), sg.values, hold=sg.hold)
+    return Shifted(sg, float(origin))
 
 
 def initial_state(system, x0) -> np.ndarray:

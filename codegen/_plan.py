@@ -24,7 +24,7 @@ import dataclasses
 
 import numpy as np
 
-from codegen._inputs import baked, plan_segments, segment_inputs
+from codegen._inputs import baked, plan_segments, segment_inputs, shifted
 from codegen._interpolants import digest, sampled_digest
 from codegen._output import output_runs
 from phs.signals import Sampled
@@ -48,6 +48,9 @@ class Plan:
     sampled: list
     runs: list
     U: np.ndarray
+    origin: float = 0.0
+    """The grid's first time: the segments, the runs and the signals ``sigs`` count time from it
+    (:func:`codegen._inputs.shifted`); add it to a run's times to name them."""
 
 
 def _key(t, sigs):
@@ -77,11 +80,15 @@ def plan_for(t, sigs, cuts=()) -> Plan:
     hit = _PLANS.get(key) if key is not None else None
     if hit is not None:
         return hit
+    origin = float(t[0])  # the runs count time from the grid's start: absolute times lose the step's digits
+    t = t - origin
+    sigs = [shifted(sg, origin) for sg in sigs]
+    cuts = tuple(float(c) - origin for c in cuts)
     segs, slots = plan_segments(sigs, t, cuts)
     sampled = [(*baked(sg), digest(baked(sg))) if baked(sg) is not None else None for sg in sigs]
     U = np.zeros((len(t), len(sigs)))
     runs = list(output_runs(t, sigs, segs, lambda choice, times, ms: segment_inputs(sigs, slots, choice, times, _TEMPLATES, ms), U))
-    plan = Plan(list(sigs), segs, slots, sampled, runs, U)
+    plan = Plan(list(sigs), segs, slots, sampled, runs, U, origin)
     if key is not None:
         while len(_PLANS) >= _PLANS_KEPT:
             _PLANS.pop(next(iter(_PLANS)))

@@ -274,7 +274,7 @@ class Simulator:
         self._check_domain(x[None, :], t[:1], p, np.zeros((1, len(s.inputs))))
         plan = plan_for(t, input_signals(s, u, t))
         if len(x) == 0:  # a static network: nothing to integrate, outputs follow the inputs
-            return self._static_result(t, plan.sigs, plan.segs, plan.slots, p, wall)
+            return self._static_result(t, plan.sigs, plan.segs, plan.slots, p, wall, plan.origin)
         nq = len(energy_columns(s)) if self.energy else 0
         X = np.empty((len(t), len(x)))
         Q = np.zeros((len(t), nq))
@@ -288,23 +288,24 @@ class Simulator:
             try:
                 zs, qs = call_into_numpy(F, z, P, len(x), r.n, nq)
             except RuntimeError as exc:
-                self._check_done(done, p)  # a state that left the domain earlier is what went wrong
+                self._check_done(done, p, plan.origin)  # a state that left the domain earlier is what went wrong
                 try:  # once more from the state with its vanishing components set to zero
                     zs, qs = call_into_numpy(F, np.where(np.abs(z) < NEGLIGIBLE, 0.0, z), P, len(x), r.n, nq)
                 except RuntimeError:
                     self._localize_failure(F, z, p, r.start, r.step, r.n, plan.slots, run_sampled(plan.sampled, r.choice),
-                                           self._calls_layout(plan, r), r.choice, exc, plan.sigs)
+                                           self._calls_layout(plan, r), r.choice, exc, plan.sigs, plan.origin)
             xs = zs * self.scale
             if not np.all(np.isfinite(xs)):
-                self._check_done(done, p)
+                self._check_done(done, p, plan.origin)
                 k = int(np.argmin(np.all(np.isfinite(xs), axis=1)))
-                raise SimulationError(f"simulation of {s.name!r}: non-finite state at t={r.times[k]:.6g}: " + fmt_state(s, xs[k]))
+                raise SimulationError(f"simulation of {s.name!r}: non-finite state at t={r.times[k] + plan.origin:.6g}: "
+                                      + fmt_state(s, xs[k]))
             done.append((xs, r))
             r.store(X, xs)
             r.store(Q, qacc + qs)
             qacc = qacc + qs[-1]
             z = zs[-1]
-        self._check_done(done, p)
+        self._check_done(done, p, plan.origin)
         nrun = len(plan.runs)
         res = SimulationResult(s, t, X, U, p, stats={"runs": nrun, "seconds": _time.perf_counter() - wall,
                                                      "method": "cvodes", "rtol": self.rtol, "atol": self.atol})
@@ -312,11 +313,12 @@ class Simulator:
             res.quadratures = energy_accounts(s, Q)
         return res
 
-    def _static_result(self, t, sigs, segs, slots, p, wall) -> SimulationResult:
+    def _static_result(self, t, sigs, segs, slots, p, wall, origin: float = 0.0) -> SimulationResult:
         U = np.zeros((len(t), len(sigs)))
+        tr = t - origin  # the segments and signals count time from the grid's start (codegen._plan.Plan.origin)
         for a, b, choice in segs:
-            sel = (t >= a) & ((t < b) | (b >= t[-1]))
-            U[sel] = self._eval_inputs(sigs, slots, choice, t[sel])
+            sel = (tr >= a) & ((tr < b) | (b >= tr[-1]))
+            U[sel] = self._eval_inputs(sigs, slots, choice, tr[sel])
         res = SimulationResult(self.system, t, np.zeros((len(t), 0)), U, p,
                                stats={"runs": 0, "seconds": _time.perf_counter() - wall, "method": "static"})
 
@@ -375,13 +377,13 @@ class Simulator:
     def _calls_layout(self, plan, r):
         return self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step)[1]
 
-    def _check_done(self, done, p) -> None:
+    def _check_done(self, done, p, origin: float = 0.0) -> None:
         """The validity domain over the output steps of the runs ``done`` (``(states, run)`` pairs) in one call."""
         if done and self.system.conditions:
-            self._check_domain(np.vstack([xs for xs, _ in done]), np.concatenate([r.times for _, r in done]), p,
+            self._check_domain(np.vstack([xs for xs, _ in done]), np.concatenate([r.times for _, r in done]) + origin, p,
                                np.vstack([r.u for _, r in done]))
 
-    def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, exc, sigs):
+    def _localize_failure(self, F, z, p, a, h, n, slots, sampled, layout, choice, exc, sigs, origin: float = 0.0):
         """Re-run the failed run one output step at a time to name the failing interval, find how far one
         call gets into it (:meth:`_reach`) and say in words what failed there, which state and what to try
         (:func:`codegen._solver_errors.describe`)."""
@@ -396,24 +398,25 @@ class Simulator:
                 xs = zc * self.scale
                 tk = a + k * h
                 uk = self._eval_inputs(sigs, slots, choice, np.array([tk]))
-                self._check_domain(xs[None, :], np.array([tk]), p, uk)
-                self._domain.predicted(xs, tk, h, p, uk)
+                self._check_domain(xs[None, :], np.array([tk + origin]), p, uk)
+                self._domain.predicted(xs, tk + origin, h, p, uk)
                 covered, step, zr = self._reach(F1, zc, p, tk, h, layout, choice, sampled)
                 if covered >= 1.0:  # shorter output steps pass through: the state where the interval starts
                     covered, zr = 0.0, zc
                 tr, xr = tk + covered * h, zr * self.scale
                 ur = self._eval_inputs(sigs, slots, choice, np.array([tr])) if covered > 0 else uk
                 if covered > 0:  # the state the integrator got to: left the domain on the way there?
-                    self._check_domain(xr[None, :], np.array([tr]), p, ur)
+                    self._check_domain(xr[None, :], np.array([tr + origin]), p, ur)
                 across = tk + h * np.array((0.0, *REACH_SHARES, 1.0))
                 with np.errstate(all="ignore"):
                     u_across = self._eval_inputs(sigs, slots, choice, across)
-                raise SimulationError(describe(step_exc, s, t0=tk, t1=tk + h, t=tr, x=xr, u=ur[0], p=p, functions=self.f,
-                                               max_steps=self.max_steps, dt=step * h, inputs=(across, u_across))) from None
+                raise SimulationError(describe(step_exc, s, t0=tk + origin, t1=tk + h + origin, t=tr + origin, x=xr, u=ur[0], p=p,
+                                               functions=self.f, max_steps=self.max_steps, dt=step * h,
+                                               inputs=(across + origin, u_across))) from None
             if not np.all(np.isfinite(zc)):
                 break
         uk = self._eval_inputs(sigs, slots, choice, np.array([a]))
-        raise SimulationError(describe(exc, s, t0=a, t1=a + n * h, x=z * self.scale, u=uk[0], p=p, functions=self.f,
+        raise SimulationError(describe(exc, s, t0=a + origin, t1=a + n * h + origin, x=z * self.scale, u=uk[0], p=p, functions=self.f,
                                        max_steps=self.max_steps)) from None
 
     def _reach(self, F1, z, p, tk, h, layout, choice, sampled):

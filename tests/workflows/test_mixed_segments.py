@@ -51,3 +51,18 @@ def test_a_parameter_vector_of_the_wrong_layout_is_refused_by_name():
     lay.check(np.zeros(7), "here")
     with pytest.raises(SimulationError, match="segment 3: the integrator takes 7 parameters"):
         lay.check(np.zeros(4), "segment 3")
+
+
+@pytest.mark.parametrize("t0", [1234.5, 1.7e9])
+def test_a_recording_stamped_late_fits_like_one_from_zero(t0):
+    """A logger's clock time (1.7e9 s is an epoch time, where a float resolves 2.4e-7 s of a 1 ms step): the runs
+    count time from the grid's start, so the fit is that of the same recording from t = 0."""
+    base = _rest_then_sine()
+    late = Recording.from_arrays(t0 + base.t, base.signals)
+    fits = [identify(mass_spring_damper(), rec, free=["k.K", "b.b"], shooting=3) for rec in (base, late)]
+    # at 1234.5 s both are at the truth to the integration's tolerance (rtol 1e-8); at 1.7e9 s the stamps themselves
+    # are rounded to 2.4e-7 s, 2.4e-4 of a step: the data were sampled at other instants than the floats say, which
+    # moves the damping by 9e-6 of itself (1e-4 allowed); before the runs counted from the grid's start it failed
+    rel = 1e-6 if t0 < 1e6 else 1e-4
+    for k, v in (("k.K", 5.0), ("b.b", 0.6)):
+        assert fits[0].values[k] == pytest.approx(v, rel=1e-6) and fits[1].values[k] == pytest.approx(v, rel=rel)

@@ -144,7 +144,7 @@ class _Problem:
             sens = Simulator(system, rtol=rtol, atol=atol, energy=False, compile=self.compiled, compiler=compiler,
                              integrator_options={**opts, "nfwd": nd})
             self.scale = sim.scale
-            window_times = t[self.window_starts]
+            window_times = t[self.window_starts] - plan.origin  # the runs count time from the grid's start
             self.segments = []
             for r in plan.runs:
                 sampled = run_sampled(plan.sampled, r.choice)
