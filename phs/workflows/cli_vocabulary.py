@@ -65,7 +65,7 @@ OPTIONS: dict[str, _Option] = {
     "--resample": _Option("resample the recordings onto a uniform grid of step DT [s] (linear interpolation)", "DT",
                           _positive("--resample")),
     "--hold": _Option("how a recorded input behaves between samples: zoh (held by a DAC) or linear (a sampled continuous "
-                      "signal); default: as the header's {annotation} says, else as its samples look", "COLUMN=zoh|linear",
+                      "signal); default: as the header's {annotation} says, else linear", "COLUMN=zoh|linear",
                       action="append"),
     "--validate": _Option("second CSV recording scored with the fitted model", "DATA2"),
     "--out": _Option("write the results table to FILE", "FILE"),
