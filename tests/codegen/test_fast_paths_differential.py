@@ -102,7 +102,8 @@ def spline_runs(case: LabCase) -> dict:
         for j, c in enumerate(r.choice):
             sg = sigs[j]
             if c is None and isinstance(sg, Sampled) and interpolation(len(sg.arrays[0]), r.max_step) == "bspline":
-                out[s.input_names[j]].append((r.start, r.start + r.n * r.step))
+                a = r.start + plan.origin  # the plan counts time from the grid's start
+                out[s.input_names[j]].append((a, a + r.n * r.step))
     return out
 
 
