@@ -117,7 +117,8 @@ class Shifted(Signal):
         return np.asarray(self.inner.breakpoints(t0 + self.origin, t1 + self.origin), dtype=float) - self.origin
 
     def expr_on(self, a, b) -> sp.Expr:
-        return sp.sympify(self.inner.expr_on(a + self.origin, b + self.origin)).xreplace({TIME: TIME + self.origin})
+        e = self.inner.expr_on(a + self.origin, b + self.origin)  # a sympy expression (a plain number for a constant)
+        return sp.Float(e) if isinstance(e, (int, float)) else e.xreplace({TIME: TIME + self.origin})
 
     def __call__(self, tt):
         return self.inner(np.asarray(tt, dtype=float) + self.origin)
