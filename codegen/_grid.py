@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 
 from phs.errors import InputDataError
-from phs.kinks import straight_stretches
 
 STEP_WINDOW = 200  # output intervals per window of a sampled input with its own step bound
 _STEP_FACTORS = (64, 32, 16, 8, 4, 2)
@@ -195,43 +194,6 @@ def step_windows(values, window: int = STEP_WINDOW, rough_ends=(False, False)) -
         else:
             joined.append((a, b, m))
     return joined
-
-
-def sampled_pieces(U, kinks, piecewise: bool) -> list[tuple[int, int, int]]:
-    """How inputs sampled on a uniform grid are integrated, as ``(i0, i1, m)``: from sample ``i0`` to ``i1``,
-    ``m`` 0 where every input is one straight line (enters as a line, exact, steps free), else the step bound
-    of a window through which the inputs are interpolated (:func:`step_windows`).
-
-    ``U`` (n, k): the inputs; ``kinks``: the samples where any of them changes slope
-    (:func:`phs.kinks.linear_kinks`); ``piecewise``: whether they are few (:data:`phs.kinks.KINK_SHARE`),
-    when the inputs are lines between consecutive kinks everywhere.  Otherwise the stretches of at least
-    :data:`phs.kinks.LINE_RUN` intervals between two kinks are lines and the rest is windowed, each
-    window next to a line keeping one interval at that end (the simulator's rule, input by input:
-    :func:`codegen._inputs.plan_segments`).
-
-    Examples
-    --------
-    >>> from phs.kinks import linear_kinks
-    >>> t = np.arange(301) * 1e-3
-    >>> u = np.where(t < 0.1, 0.0, np.sin(30 * (t - 0.1)))       # a hold, then a sine
-    >>> sampled_pieces(u[:, None], linear_kinks(u), False)[:3]
-    [(0, 100, 0), (100, 125, 1), (125, 300, 8)]
-    """
-    U = np.asarray(U, dtype=float).reshape(len(U), -1)
-    n = len(U)
-    if piecewise:
-        edges = sorted({0, n - 1} | {int(k) for k in kinks})
-        return [(a, b, 0) for a, b in zip(edges[:-1], edges[1:])]
-    lines = straight_stretches(kinks, n)
-    out: list[tuple[int, int, int]] = []
-    pos = 0
-    for a, b in lines + [(n - 1, n - 1)]:
-        if a > pos:  # interpolated from pos to a; a kink at either end where a line meets it
-            out += [(pos + i0, pos + i1, m) for i0, i1, m in step_windows(U[pos: a + 1], rough_ends=(pos > 0, a < n - 1))]
-        if b > a:
-            out.append((a, b, 0))
-        pos = max(pos, b)
-    return out
 
 
 def bounded_runs(runs, interpolated, rough_ends=(False, False)):

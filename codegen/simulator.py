@@ -35,7 +35,7 @@ import numpy as np
 import sympy as sp
 
 from codegen._domain import DomainCheck, fmt_state
-from codegen._grid import sampled_pieces, step_windows, time_grid
+from codegen._grid import step_windows, time_grid
 from codegen._inputs import initial_state, input_signals, run_sampled, segment_inputs
 from codegen._interpolants import _digest, _interpolant, interpolation
 from codegen._layout import ParamLayout
@@ -49,7 +49,7 @@ from codegen.translate import Translator
 from phs.errors import InputDataError, SimulationError
 from phs.params import TIME
 
-__all__ = ["simulate", "simulator", "Simulator", "sampled_pieces", "step_windows"]
+__all__ = ["simulate", "simulator", "Simulator", "step_windows"]
 
 _CALLS_KEPT = 8
 """Plans whose integrator calls a simulator keeps (:meth:`Simulator._calls`)."""

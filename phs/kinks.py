@@ -2,7 +2,7 @@
 
 A recorded input enters a simulation or a fit as straight lines between its kinks where they are few
 (:data:`KINK_SHARE`) or far apart (:data:`LINE_RUN`), and through an interpolant elsewhere
-(:meth:`phs.signals.Sampled.kinks`, :meth:`phs.signals.Sampled.lines`, :func:`codegen.simulator.sampled_pieces`).
+(:meth:`phs.signals.Sampled.kinks`, :meth:`phs.signals.Sampled.lines`, :func:`codegen._inputs.plan_segments`).
 """
 
 from __future__ import annotations

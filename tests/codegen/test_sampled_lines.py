@@ -72,25 +72,27 @@ def test_rc_circuit_against_its_exact_solution():
 
 
 def test_identification_integrates_the_inputs_as_the_simulator_does():
-    # identification's pieces (codegen._grid.sampled_pieces) and the simulator's runs: the same lines and
-    # the same step bound on every sample interval (0 on a line)
-    from codegen._grid import sampled_pieces
-    from codegen._output import output_runs
-    from phs.kinks import linear_kinks
+    # identification's segments are the simulator's runs of the same recording: the same output steps, the same
+    # integrator (lines over the holds, the interpolant with its step bound between) and the same parameter tail
+    import phs.workflows.identify.sensitivities as ident
+    from codegen._plan import plan_for
+    from phs.workflows.recording import Recording
 
     u = _mixed()
     s = Sampled(tuple(T), tuple(u))
-    segs, slots = plan_segments([s], T)
-    sim_bound = np.full(len(T) - 1, -1.0)
-    for r in output_runs(T, [s], segs, lambda c, tt, ms: np.asarray(s(tt))[:, None], np.zeros((len(T), 1))):
-        i0 = int(round(r.start / 1e-3))
-        sim_bound[i0: i0 + r.n] = 0.0 if r.choice[0] is not None else r.max_step
-    fit_bound = np.full(len(T) - 1, -1.0)
-    for i0, i1, m in sampled_pieces(u[:, None], linear_kinks(u), False):
-        fit_bound[i0:i1] = m
-    assert np.all(sim_bound >= 0) and np.all(fit_bound >= 0)  # every interval covered
-    assert np.array_equal(sim_bound, fit_bound)
-    assert {0.0, 1.0} < set(sim_bound.tolist())  # lines, one-interval windows and longer steps all occur
+    rec = Recording.from_arrays(T, {"U": u, "v_C": np.zeros(len(T))})
+    prob = ident._Problem(rc_circuit(), rec, ["R.R"], [], ["v_C"], {"v_C": 1.0}, np.zeros(1), [], 1e-9, None)
+    plan = plan_for(T, [s])
+    sim = Simulator(rc_circuit(), rtol=1e-9, energy=False, integrator_options={"second_order_correction": False})
+    assert len(prob.segments) == len(plan.runs)
+    kinds = set()
+    for sg, r in zip(prob.segments, plan.runs, strict=True):
+        F, layout = sim._integrator(r.n, plan.slots, [g if c is None else None for g, c in zip(plan.sampled, r.choice)],
+                                    r.max_step)
+        assert np.array_equal(sg.rows, r.j[r.on]) and sg.layout == layout
+        np.testing.assert_array_equal(sg.tail, sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice))
+        kinds.add(0.0 if r.choice[0] is not None else r.max_step)
+    assert {0.0, 1.0} < kinds  # lines, one-interval windows and longer steps all occur
 
 
 def test_batch_runs_equal_the_simulator_on_a_mixed_input():
