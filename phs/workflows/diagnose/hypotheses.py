@@ -115,6 +115,8 @@ class Data:
     weights: object = None     # channel weights of every fit: None (1 / std of the channel), "ml" or a dict;
     #                            after the nominal fit, the dict it ended with (every hypothesis uses the same)
     given: dict | None = None  # the free parameters' values the model was built with (set by the nominal fit)
+    carried: dict = field(default_factory=dict)  # accepted input elements its recordings already go through:
+    #                            "effect@place" -> the element's fitted parameters (:func:`through_element`)
 
     @property
     def n_train(self) -> int:
@@ -158,6 +160,46 @@ def _transformed(rec: Recording, element, where: str, theta) -> Recording:
     between.update(element.drive_between(rec.t, sig, where, theta))
     sig.update(driven)
     return Recording(rec.t, sig, rec.source, rec.units, between)
+
+
+def _element_key(aug) -> str:
+    return f"{aug.effect}@{aug.attached_to}"
+
+
+def through_element(data: Data, h) -> Data:
+    """The data every model built on the fitted ``h`` is fitted and scored on: ``data`` with its training
+    and validation recordings through ``h``'s input element at its fitted parameters
+    (``h.element_values``), the element recorded in :attr:`Data.carried`; ``data`` itself when ``h`` has
+    no input element or ``data`` goes through it already.
+
+    A hypothesis with an input element is scored on the data before its element (:func:`score` and
+    :func:`train_result` apply it); once it is accepted, the next round's hypotheses, a discovered
+    correction and the final scores all read the element's signals from the data, and
+    :func:`train_result` no longer applies it a second time.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> from components.candidates import TimeDelay
+    >>> t = np.arange(5) * 0.1
+    >>> rec = Recording.from_arrays(t, {"U": np.array([0.0, 1.0, 1.0, 1.0, 1.0]), "y": np.zeros(5)})
+    >>> data = Data(rec, rec, np.ones(5, bool), None, ["y"], [], {}, [], None)
+    >>> h = NS(augmentation=NS(effect="time_delay", attached_to="U", element=TimeDelay()), element_values={"time_delay.tau_d": 0.1})
+    >>> d = through_element(data, h)
+    >>> d.recording["U"].tolist(), d.carried
+    ([0.0, 0.0, 1.0, 1.0, 1.0], {'time_delay@U': {'time_delay.tau_d': 0.1}})
+    >>> through_element(d, h) is d   # once only
+    True
+    """
+    aug = h.augmentation
+    el = aug.element if aug is not None else None
+    if el is None or _element_key(aug) in data.carried:
+        return data
+    where = aug.attached_to
+    theta = [h.element_values[f"{el.effect}.{spec[0]}"] for spec in el.parameters(data.recording.t, command(data.recording, where))]
+    rec = _transformed(data.recording, el, where, theta)
+    val = rec if data.validation is data.recording else _transformed(data.validation, el, where, theta)
+    return replace(data, recording=rec, validation=val, carried={**data.carried, _element_key(aug): dict(h.element_values)})
 
 
 def _element_base(nominal: Scored, aug):
@@ -262,6 +304,8 @@ def train_result(h: Scored, data: Data) -> SimulationResult:
     """The full simulated training trajectory of a scored model (simulated once, then kept)."""
     if h.simulated.get("train") is None:
         el = h.augmentation.element if h.augmentation is not None else None
+        if el is not None and _element_key(h.augmentation) in data.carried:  # the data go through it already
+            el = None
         theta = list(h.element_values.values())
         rec = _transformed(data.recording, el, h.augmentation.attached_to if el else "", theta)
         h.simulated["train"] = _simulate(h.system, rec, h.x0)

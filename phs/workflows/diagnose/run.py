@@ -104,7 +104,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     ('model_cannot_describe', ['scale'], [])
     """
     from components.candidates import LIBRARY, Scales
-    from phs.workflows.diagnose.hypotheses import Data, train_result
+    from phs.workflows.diagnose.hypotheses import Data, through_element, train_result
     from phs.workflows.diagnose.nominal import fit_nominal
 
     wall = time.perf_counter()
@@ -177,7 +177,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                         print(f"  {c.effect}@{w}: cannot attach ({exc})", file=sys.stderr)
         if progress:
             print(f"diagnose {system.name}: round {round_ + 1}, {len(augs)} hypotheses", file=sys.stderr, flush=True)
-        data_r = data if round_ == 0 or accepted[-1].augmentation.element is None else _through_element(data, accepted[-1])
+        data_r = data  # through every input element accepted so far (through_element)
         if round_ > 0:
             data_r = replace(data_r, free=list(dict.fromkeys(list(data_r.free) + [k for a in accepted for k in a.augmentation.free])))
         hyps = _screen_and_refit(current, augs, data_r, n_jobs, progress, f"round {round_ + 1}", refit_top, noise)
@@ -198,7 +198,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             break
         accepted.append(pick)
         current = pick
-        data = data_r
+        data = through_element(data_r, pick)  # what follows (rounds, discovery, final scores) reads its signals
         # a second effect only when the first leaves a structured residual well above the noise
         if not _structured(current, noise, outs):
             break
@@ -323,12 +323,3 @@ def _coloured(findings, h, data) -> bool:
             if float(np.sqrt(np.mean(r**2))) >= RELEVANT * (float(np.std(data.recording[f.channel])) or 1.0):
                 return True
     return False
-
-
-def _through_element(data, h):
-    from phs.workflows.diagnose.hypotheses import _transformed, command
-
-    el, where = h.augmentation.element, h.augmentation.attached_to
-    theta = [h.element_values[f"{el.effect}.{s}"] for s in [p[0] for p in el.parameters(data.recording.t, command(data.recording, where))]]
-    return replace(data, recording=_transformed(data.recording, el, where, theta),
-                   validation=_transformed(data.validation, el, where, theta))

@@ -236,10 +236,10 @@ def _x0(current, system) -> list:
 def _window(data, base):
     """``data`` with its training recording cut to its first :data:`MAX_SAMPLES` samples and a separate
     validation recording to its leading part (:func:`~phs.workflows.diagnose.screening.validation_samples`)
-    for the forward selection's fits; ``data`` itself when short enough or when ``base`` ends in an input
-    element (its transformed input belongs to the whole)."""
-    aug = base.augmentation
-    if (aug is not None and aug.element is not None) or data.train_mask is not None:
+    for the forward selection's fits; ``data`` itself when short enough or when its training recording is
+    part of the validation one.  An input element of ``base`` is already in ``data``
+    (:func:`~phs.workflows.diagnose.hypotheses.through_element`: applied to the whole recording, then cut)."""
+    if data.train_mask is not None:
         return data
     from phs.workflows.diagnose.screening import validation_samples
 
@@ -317,10 +317,14 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
     -------
     Discovery
     """
+    from phs.workflows.diagnose.hypotheses import through_element
     from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
     from phs.workflows.diagnose.screening import _run_all
 
     wall = time.perf_counter()
+    # an input element accepted last is applied by ``base``'s own scores only: the correction's models
+    # (``base.system`` plus terms) read its signals from the data
+    data = through_element(data, base)
     res, traj = _trajectory(base, data)
     terms = dictionary(base.system, _scales(base, data, res), traj, outputs=data.outputs)
     out = Discovery(base)
@@ -377,6 +381,8 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
             out.reason = "the terms chosen on a window of the training recording did not hold on the whole of it"
     if chosen:
         final.stage = "full"
+        # the input elements the model's inputs go through stay part of it (their parameters held)
+        final.element_values = {k: v for values in data.carried.values() for k, v in values.items()}
         final.reference_rss, final.reference_bic = base.validation_rss, base.bic
         final.label = f"discovered@{chosen[0].state}"
         out.scored, out.terms = final, tuple(chosen)
