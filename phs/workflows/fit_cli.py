@@ -85,8 +85,9 @@ def run_fit(args: argparse.Namespace) -> int:
 def _fit_summary_text(args: argparse.Namespace, result) -> str:
     import phs
 
+    filled = "".join(f" --input {spec}" for spec in getattr(args, "input", None) or ())
     head = [f"phs {phs.__version__} fit {args.model} {args.data}" + (f" --validate {args.validate}" if args.validate
-                                                                      else ""),
+                                                                      else "") + filled,
             f"model hash {result.system.model_hash()}; {len(result.residuals[result.outputs[0]])} samples; "
             f"outputs {', '.join(result.outputs)}"]
     return "\n".join(head + [result.summary()])
@@ -112,6 +113,7 @@ def _fit_json(args: argparse.Namespace, result, val, sensitivity: dict) -> str:
         "command": "fit",
         "model": args.model,
         "data": args.data,
+        "input": list(getattr(args, "input", None) or ()),  # inputs the recordings lacked, as --input NAME=EXPR
         "phs_version": phs.__version__,
         "x0": {name: float(v) for name, v in zip(result.system.state_names, result.x0, strict=True)},
         "validation": None if val is None else {"data": args.validate, "samples": len(val),
