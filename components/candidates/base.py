@@ -49,7 +49,15 @@ class Scales:
     ``value[name]``: RMS deviation of a state, input or measured output from its mean;
     ``level[name]``: RMS value (about zero); ``coenergy[state]``: RMS of ∂H/∂x for that state
     (velocity of a momentum, voltage of a charge, force of a displacement); ``rate[state]``: RMS of the
-    state's time derivative; ``duration``: recording length [s]; ``dt``: sampling step [s].
+    state's time derivative; ``force[momentum]``: the force a body feels (below); ``duration``: recording
+    length [s]; ``dt``: sampling step [s].
+
+    The force a body feels is the larger RMS of its inertia ``ṗ`` and of the net conservative and
+    source force on it, ``J[p, :] ∇H + G[p, :] u`` (its damping lies between them: ``ṗ`` is their
+    difference).  Springs and sources count by their sum: a position loop's virtual spring to the
+    origin and its reference force ``K_p r`` pull the body apart by ``K_p (r − x)``, not by ``K_p x``.
+    Without a trajectory the table is empty and a candidate falls back to the coenergy of the body's
+    displacement.
 
     Examples
     --------
@@ -62,6 +70,7 @@ class Scales:
     level: dict = field(default_factory=dict)
     coenergy: dict = field(default_factory=dict)
     rate: dict = field(default_factory=dict)
+    force: dict = field(default_factory=dict)
     duration: float = 1.0
     dt: float = 1e-3
 
@@ -97,13 +106,33 @@ class Scales:
             for i, st in enumerate(system.states):
                 rate[st.name] = _rms(dxdt[:, i])
         if x is None:
-            return Scales(value, level, co, rate, 1.0, 1e-3)
+            return Scales(value, level, co, rate, {}, 1.0, 1e-3)
+        force = _body_forces(system, xs[idx], us[idx], g, rate)
         t = np.asarray(t, float)
-        return Scales(value, level, co, rate, float(t[-1] - t[0]) or 1.0, float(np.median(np.diff(t))) if len(t) > 1 else 1e-3)
+        return Scales(value, level, co, rate, force, float(t[-1] - t[0]) or 1.0,
+                      float(np.median(np.diff(t))) if len(t) > 1 else 1e-3)
 
     def get(self, table: str, name: str, default: float = 1.0) -> float:
         v = getattr(self, table).get(name, 0.0)
         return float(v) if v and np.isfinite(v) and v > 0 else float(default)
+
+
+def _body_forces(system, xs, us, grads, rate) -> dict:
+    """RMS force each body (momentum state) feels along a trajectory: the larger of its inertia
+    (``rate``) and its net conservative and source force ``J[p, :] ∇H + G[p, :] u``."""
+    bodies = momentum_states(system)
+    if not bodies:
+        return {}
+    rows = [system.state_names.index(b) for b in bodies]
+    J, G = system.J, system.G
+    jg = system.lambdify(sp.Matrix([J[i, :] for i in rows]), with_u=False)
+    gg = system.lambdify(sp.Matrix([G[i, :] for i in rows]), with_u=False) if G.shape[1] else None
+    f = np.zeros((len(xs), len(rows)))
+    for n, (x, gr) in enumerate(zip(xs, grads)):
+        f[n] = np.asarray(jg(x), float).reshape(len(rows), -1) @ gr
+        if gg is not None:
+            f[n] += np.asarray(gg(x), float).reshape(len(rows), -1) @ np.asarray(us[n], float)
+    return {b: max(_rms(f[:, k]), float(rate.get(b, 0.0))) for k, b in enumerate(bodies)}
 
 
 def _rms(v) -> float:

@@ -52,7 +52,9 @@ class _AtMomentum(_AtStates):
         v = system.grad_H[i]
         v_ref = scales.get("coenergy", where, 1.0)
         q = _position_partner(system, where)
-        f_ref = scales.get("coenergy", q, 0.0) if q else 0.0
+        f_ref = scales.get("force", where, 0.0)  # the force the body feels (Scales), else its spring's
+        if not f_ref:
+            f_ref = scales.get("coenergy", q, 0.0) if q else 0.0
         if not f_ref:
             f_ref = scales.get("rate", where, 1.0)
         x_ref = scales.get("value", q, 1.0) if q else v_ref * scales.duration
