@@ -87,6 +87,15 @@ class PositionLoop(Component):
         the controller owns the position state ``{name}.x``.
     range : (float, float)
         Physical range [m] of the position and the filtered reference.
+    feedforward : str, optional
+        Name of an input added to the controller's output (a feedforward or test signal injected after
+        the control law and recorded with it): the body feels ``F_c + feedforward_gain · u_ff`` and the
+        measured ``effort`` is that sum.  Its conjugate output ``{feedforward}.v`` is
+        ``feedforward_gain`` times the body's velocity.
+    feedforward_gain : float
+        Force per unit of the feedforward input [N per its unit] (default 1: the input is a force).
+    feedforward_unit : str
+        Unit of the feedforward input (default ``"N"``).
 
     Examples
     --------
@@ -102,8 +111,12 @@ class PositionLoop(Component):
     """
 
     def __init__(self, name: str, K_p=1.0, K_d=0.0, tau=None, *, reference: str = "r", effort: str | None = None,
-                 position: str | None = None, range=(-1.0, 1.0)):
+                 position: str | None = None, range=(-1.0, 1.0), feedforward: str | None = None,
+                 feedforward_gain: float = 1.0, feedforward_unit: str = "N"):
         super().__init__(name)
+        if feedforward is not None:
+            require_positive(name, "feedforward_gain", feedforward_gain)
+        self.feedforward, self.ff_gain, self.ff_unit = feedforward, float(feedforward_gain), feedforward_unit
         require_positive(name, "K_p", K_p)
         _nonnegative(name, "K_d", K_d)
         if tau is not None:
@@ -136,8 +149,14 @@ class PositionLoop(Component):
             spring_force = 0  # acts through dH/dx of the plant's own position state
         y = symbol_of_output(info.output)
         r = info.symbol
+        ff, ff_force = None, 0  # a signal added after the control law (feedforward), a force on the body
+        if self.feedforward is not None:
+            ff = self._port("ff", "any", supplies=True)
+            internal.append(ff)
+            ff_force = self.ff_gain * ff.effort
+            rels.append(Relation(ff.flow - self.ff_gain * port.flow, self.name, "feedforward"))
         if not filtered:
-            rels += [Relation(port.effort - (spring_force + kd * port.flow - kp * ref.effort), self.name, "controller"),
+            rels += [Relation(port.effort - (spring_force + kd * port.flow - kp * ref.effort - ff_force), self.name, "controller"),
                      Relation(ref.flow - kp * port.flow, self.name, "controller")]
             diss = Dissipator(self.name, (), kd * port.flow**2)
             force = kp * (r - x) - kd / kp * y
@@ -151,14 +170,20 @@ class PositionLoop(Component):
             rf, s = fs.state.symbol, fs.port.effort
             energy.append(EnergyTerm(f"{self.name}.filter", kf * rf**2 / 2))
             rels += [Relation(fs.port.flow - ref.effort / tau + s / (tau * kf), self.name, "filter"),
-                     Relation(port.effort - (spring_force + kd * port.flow - a * s - b * ref.effort), self.name, "controller"),
+                     Relation(port.effort - (spring_force + kd * port.flow - a * s - b * ref.effort - ff_force), self.name, "controller"),
                      Relation(ref.flow - b * port.flow - s / tau, self.name, "controller")]
             diss = Dissipator(self.name, (), kd * port.flow**2 - a * s * port.flow + s**2 / (tau * kf))
             # K_p (r_f - x) + K_d (r_f' - v), with K_d v = tau y - k_f r_f
             force = kp * (rf - x) + kd * (r - rf) / tau - (tau * y - kf * rf)
+        sources = [Source(info, ref)]
+        if ff is not None:  # recorded with the command: the measured effort is the sum
+            ff_info = InputInfo(self.feedforward, self.ff_unit, f"{self.feedforward}.v", f"N*m/s/({self.ff_unit})", "effort",
+                                f"signal added to the output of the position controller {self.name}")
+            sources.append(Source(ff_info, ff))
+            force = force + self.ff_gain * ff_info.symbol
         meas = Measured(self.effort, force, "N", f"force computed by the position controller {self.name}", command=True)
         return Piece(self.name, storages=tuple(storages), energy=tuple(energy), ports=(port,), internal=tuple(internal),
-                     relations=tuple(rels), sources=(Source(info, ref),), dissipators=(diss,), params=params,
+                     relations=tuple(rels), sources=tuple(sources), dissipators=(diss,), params=params,
                      measured=(meas,))
 
 
