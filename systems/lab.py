@@ -8,6 +8,9 @@ known to contain.  They are the nominal models of the diagnosis demonstrations
 - :func:`air_chamber`: a closed, charged compressed-air chamber (isothermal, rigid).
 - :func:`seal_friction_rig`: a pneumatic piston pushed through its stroke by a drive while the
   chamber pressure acts on it and a load cell measures the rod force; viscous seal friction.
+- :func:`emps_stage` and :func:`emps_stage_matrices`: an electro-mechanical positioning stage (a carriage on a
+  ball screw) in its cascaded position and velocity loop (EMPS benchmark, Janot, Gautier, Brunot),
+  mass and viscous friction; built from components, and the same model written by hand.
 """
 
 from __future__ import annotations
@@ -139,4 +142,89 @@ def seal_friction_rig(m: float = 0.5, A: float = 5.3e-4, k: float = 2e5, b: floa
         params=[pm, pA, pk, pb], measured=[Measured("force", K * q, "N", "rod force (load cell)")],
         dissipators=[("seal", {(1, 1): B})],
         description="pneumatic piston, drive and load cell; viscous seal",
+    )
+
+
+EMPS_LOOP = {"kp": 160.18, "kv": 243.45, "gtau": 35.15065188248547}
+"""The EMPS stage's loop: position gain ``kp`` [1/s], velocity gain ``kv`` [V s/m] and the drive's force per
+volt ``gtau`` [N/V]; the controller's voltage is ``vir = kv (kp (qg − qm) − dqm/dt)``."""
+
+
+def _emps_params(M: float, Fv: float) -> tuple[Param, Param]:
+    return (Param("cart.m", M, "kg", "moving mass (carriage, screw and motor, as seen at the carriage)", range=(10.0, 1000.0)),
+            Param("fv.b", Fv, "N*s/m", "viscous friction", range=(1.0, 5000.0)))
+
+
+def emps_stage(M: float = 95.0, Fv: float = 200.0) -> PHSystem:
+    """The EMPS positioning stage in its loop, built from components: a carriage (:class:`~components.Mass`)
+    with viscous friction (:class:`~components.Damper`) under the rig's cascaded loop, which is a PD
+    position loop (:class:`~components.PositionLoop`, ``K_p = gtau·kv·kp``, ``K_d = gtau·kv``,
+    :data:`EMPS_LOOP`).
+
+    Inputs: ``qg`` [m] the reference position, ``pulses_N`` [V] a test signal added to the controller's
+    voltage after the control law (recorded with it; zero in the estimation run).  Measured: ``qm`` [m]
+    the carriage position and ``force`` [N] the drive force ``gtau·vir`` (the recorded ``vir`` times
+    ``gtau``: ``--map vir=force --scale vir=35.15065188248547``).
+
+    Examples
+    --------
+    >>> s = emps_stage()
+    >>> s.state_names, s.input_names, s.measured_names
+    (['cart.p', 'pl.x'], ['qg', 'pulses_N'], ['force', 'qm'])
+    """
+    from components import Damper, Mass, PositionLoop
+    from phs import Measured, interconnect, series, symbol_of_state
+
+    g = EMPS_LOOP
+    pm, pb = _emps_params(M, Fv)
+    return interconnect(
+        "emps",
+        [Mass("cart", m=pm), Damper("fv", b=pb),
+         PositionLoop("pl", K_p=g["gtau"] * g["kv"] * g["kp"], K_d=g["gtau"] * g["kv"], reference="qg", effort="force",
+                      range=(-0.5, 0.5), feedforward="pulses_N", feedforward_gain=g["gtau"], feedforward_unit="V")],
+        [series("cart", "fv", "pl")],
+        measured=[Measured("qm", symbol_of_state("pl.x"), "m", "carriage position (motor encoder)")],
+        description="EMPS positioning stage in its position loop; mass and viscous friction",
+    )
+
+
+def emps_stage_matrices(M: float = 95.0, Fv: float = 200.0) -> PHSystem:
+    """:func:`emps_stage` written by hand as one port-Hamiltonian system.
+
+    States ``q`` [m] (carriage position) and ``p`` [kg m/s] (momentum).  The loop is a virtual spring
+    ``K = gtau·kv·kp`` to the origin with the reference acting as the force ``K qg``, and a virtual damper
+    ``D = gtau·kv`` beside the viscous friction: ``ṗ = −K q − (Fv + D) p/M + K qg + gtau·pulses_N``,
+    ``q̇ = p/M``.  Measured: ``qm = q`` and the drive force
+    ``force = K (qg − q) − D p/M + gtau·pulses_N`` (the controller's command, recorded as ``gtau·vir``).
+
+    Examples
+    --------
+    >>> s = emps_stage_matrices()
+    >>> s.state_names, s.input_names, s.measured_names
+    (['q', 'p'], ['qg', 'pulses_N'], ['qm', 'force'])
+    >>> s.check().ok
+    True
+    """
+    g = EMPS_LOOP
+    known = [Param("loop.K", g["gtau"] * g["kv"] * g["kp"], "N/m", "the loop's virtual stiffness gtau*kv*kp", range=(1e3, 1e8)),
+             Param("loop.D", g["gtau"] * g["kv"], "N*s/m", "the loop's virtual damping gtau*kv", range=(1.0, 1e6)),
+             Param("gtau", g["gtau"], "N/V", "drive force per volt", range=(1.0, 1e3))]
+    K, D, gt = (k.symbol for k in known)
+    q, p = sp.symbols("q p", real=True)
+    pm, pb = _emps_params(M, Fv)
+    Ms, Fvs = pm.symbol, pb.symbol
+    qg, pul = sp.Symbol("qg", real=True), sp.Symbol("pulses_N", real=True)
+    states = [StateInfo("q", "m", (-0.5, 0.5), "carriage position", "C", 0.1, "loop"),
+              StateInfo("p", "kg*m/s", (-100.0, 100.0), "carriage momentum", "I", 10.0, "cart")]
+    H = [EnergyTerm("loop", K * q**2 / 2), EnergyTerm("cart", p**2 / (2 * Ms))]
+    return PHSystem(
+        "emps", states, H, sp.Matrix([[0, 1], [-1, 0]]), sp.Matrix([[0, 0], [0, Fvs + D]]), sp.Matrix([[0, 0], [K, gt]]),
+        inputs=[InputInfo("qg", "m", "qg.y", "N/s", "effort", "reference position", (-0.5, 0.5)),
+                InputInfo("pulses_N", "V", "pulses_N.v", "W/V", "effort", "test signal added to the controller's voltage")],
+        params=[pm, pb, *known],
+        measured=[Measured("qm", q, "m", "carriage position (motor encoder)"),
+                  Measured("force", K * (qg - q) - D * p / Ms + gt * pul, "N", "drive force gtau*vir (controller command)",
+                           command=True)],
+        dissipators=[("friction", {(1, 1): Fvs}), ("loop", {(1, 1): D})],
+        description="EMPS positioning stage in its position loop, written by hand; mass and viscous friction",
     )
