@@ -9,13 +9,15 @@ from dataclasses import replace
 
 import numpy as np
 
+from components.candidates import momentum_states
 from phs.errors import InputDataError, ParameterError
+from phs.workflows.diagnose.consistency import pointers, reconcile
 from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick, partial
 from phs.workflows.diagnose.refusal import refusal
 from phs.workflows.diagnose.result import Diagnosis, _verdict
-from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _screen_and_refit
+from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _refit_pointed, _screen_and_refit
 
 SPLIT = 0.7
 """Share of a single recording used for training when no validation recording is given."""
@@ -152,6 +154,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         return Diagnosis(system, outs, nominal, [], [], [], nominal, refused, noise, time.perf_counter() - wall, [], data)
     data0 = data  # the nominal model's data (a rival correction is fitted from the nominal model)
     findings = _locate(nominal, system, data, noise)
+    pointed = pointers(findings, momentum_states(system))
     current, accepted, all_hyps, rounds = nominal, [], [], []
     pool = cands
     for round_ in range(max_effects):
@@ -190,6 +193,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             if refit(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
                 hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
                 pick = _pick(current, hyps, data_r)
+        # the family the located mismatch points at gets full fits when the choice is not of it
+        if round_ == 0 and _refit_pointed(current, hyps, pick, data_r, pointed, progress, f"round {round_ + 1}"):
+            hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
+            pick = _pick(current, hyps, data_r)
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
             pick = _polished(current, pick, data_r, progress, f"round {round_ + 1}")  # a rival's looser refit, finished
@@ -269,6 +276,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
     verdict["residual_above_noise"] = bool(_structured(final, noise, outs) or _coloured(final_findings, final, data))
     verdict = partial(verdict)
+    if found is None or not found.found:  # a library verdict (or none) against what the located mismatch points at
+        verdict = reconcile(verdict, pointed, [h.label for h in (rounds[0] if rounds else [])])
     return Diagnosis(system, outs, nominal, findings, all_hyps, accepted, final, verdict, noise,
                      time.perf_counter() - wall, rounds, data, final_findings, found)
 

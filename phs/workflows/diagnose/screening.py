@@ -112,6 +112,25 @@ def _refit_in_place(current, hyps, screened, data, progress, label) -> None:
         hyps[hyps.index(h)] = f
 
 
+def _refit_pointed(current, hyps, pick, data, pointed, progress, label) -> bool:
+    """When the located mismatch points at a family of effects (:mod:`~phs.workflows.diagnose.consistency`)
+    and the choice ``pick`` (or no choice) is not of it, refit the family's hypotheses that were only
+    screened jointly to convergence, so that the choice weighs them on a full fit (a screening that ended
+    at the nominal model is refitted from its own starts); whether any was refitted."""
+    from phs.workflows.diagnose.consistency import unmatched
+
+    missing = unmatched(pointed, [pick.augmentation.effect] if pick is not None else [])
+    family = {e for p in missing for e in p.effects}
+    waiting = [h for h in hyps if h.ok and h.stage != "full" and h.augmentation.effect in family]
+    if not waiting:
+        return False
+    augs = [h.augmentation if h.no_improvement else _for_refit(h) for h in waiting]
+    full = _run_all(current, augs, data, len(augs), progress, label + " refit of the located family", ordered=True)
+    for h, f in zip(waiting, full, strict=True):
+        hyps[hyps.index(h)] = f
+    return True
+
+
 def _refit_friction_rival(current, hyps, pick, data, progress, label):
     """When a friction-like hysteresis wins (:data:`FRICTION_LIKE`) and Coulomb friction at the same
     momentum was only screened, refit it jointly so that :func:`_pick` can weigh the two alike."""
