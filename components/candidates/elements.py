@@ -73,6 +73,24 @@ def command_channels(system) -> list[str]:
     return [m.name for m in system.measured if m.command]
 
 
+def controller_inputs(system) -> list[str]:
+    """The inputs a controller's computed command (:func:`command_channels`) is computed from: its reference
+    and any signal added to its output.  They are signals inside the controller, not drives: an element
+    between a command and the plant sits at the command.
+
+    Examples
+    --------
+    >>> from systems.examples import pd_servo
+    >>> controller_inputs(pd_servo())
+    ['r']
+    """
+    symbols = set()
+    for m in system.measured:
+        if m.command:
+            symbols |= {s.name for s in getattr(m.expr, "free_symbols", ())}
+    return [n for n in system.input_names if n in symbols]
+
+
 def deviation_input(channel: str, effect: str) -> str:
     """Name of the input through which an element of kind ``effect`` between the command ``channel``
     and the plant acts (:func:`with_deviation`).
@@ -188,7 +206,9 @@ class InputElement(Candidate):
         element changes nothing), with the inputs driven by the very same command joined into one place
         ``a+b+c`` (an element in each of their drives, with one set of parameters: several actuators of
         one kind driven together, as :func:`~components.candidates.base.with_groups` joins the parts of
-        identical segments).  A controller's command is a place of its own, when it was recorded.
+        identical segments).  A controller's command is a place of its own, when it was recorded; the inputs
+        it is computed from (:func:`controller_inputs`: its reference, a signal added to its output) are then
+        no place: they are signals inside the controller, and a drive element acts on the command.
 
         Examples
         --------
@@ -204,9 +224,14 @@ class InputElement(Candidate):
         """
         groups: list[tuple[np.ndarray, list[str]]] = []
         loops = command_channels(system)
+        # a recorded command is where a drive element sits; the signals it is computed from are not drives
+        recorded = any(c in commands and np.ptp(np.asarray(commands[c], float)) > 0 for c in loops)
+        inside = set(controller_inputs(system)) if recorded else set()
         out = []
         for n in self.attach_points(system):
             if n in loops and n not in commands:  # the controller's output was not recorded
+                continue
+            if n in inside:
                 continue
             u = np.asarray(commands[n], float)
             if np.ptp(u) == 0:

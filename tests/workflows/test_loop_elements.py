@@ -78,9 +78,10 @@ def test_attach_points_are_the_commands_and_never_a_deviation():
     assert InputSaturation().attach_points(aug.system) == ["r", "u_c"]
     with pytest.raises(ModelError, match="cannot attach"):
         TimeDelay().augment(servo, "r+u_c", Scales.of(servo))
-    # places: where the recording varies; a controller output that was not recorded is no place
+    # places: where the recording varies; a controller output that was not recorded is no place, and
+    # where it was, the reference it is computed from is a signal inside the controller, no drive
     ramp = np.linspace(0.0, 1.0, 5)
-    assert TimeDelay().places(servo, {"r": ramp, "u_c": ramp}) == ["r", "u_c"]
+    assert TimeDelay().places(servo, {"r": ramp, "u_c": ramp}) == ["u_c"]
     assert TimeDelay().places(servo, {"r": ramp}) == ["r"]
     assert TimeDelay().places(servo, {"r": ramp, "u_c": 0 * ramp}) == ["r"]
 
