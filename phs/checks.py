@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
+from phs._budget import MAX_TERMS, affordable, expanded_terms, is_zero, mp_values, scaled_block
 from phs._sparse import nonzero_entries
 from phs.errors import UnitError
 from phs.storage_bound import bounded_below
@@ -122,25 +123,72 @@ def _psd_samples(system, k: int = 8, seed: int = 0, with_params: bool = False, b
                     where.append((nb, pos[i], pos[j]))
     zero_u = [0.0] * len(system.inputs)
     f = system._lambdify(exprs, True, plain_names=True)
-    worst = None
+    fc = system.lambdify([c.expr for c in system.conditions]) if system.conditions else None
+    worst, nonfinite, outside = None, [], 0
+    pnames = [s.name for s in system.states]
     for x, p in _points(system, k, seed, with_params):
+        point = dict(zip(pnames, x))
+        if with_params:
+            point.update(dict(zip(system.param_names, p)))
+        if fc is not None:
+            with np.errstate(all="ignore"):
+                c = np.asarray(fc(x, zero_u, p), dtype=float)
+            if not np.all(c >= 0):
+                outside += 1  # outside the validity domain: the model says nothing there
+                continue
         with np.errstate(all="ignore"):
             vals = np.asarray(f(x, zero_u, p), dtype=float).reshape(-1)
+        scaled = set()
         if not np.all(np.isfinite(vals)):
-            continue
+            # inf - inf in floating point: evaluate again with mpmath, and scale each block by its largest entry
+            mp = mp_values(exprs, system.x + system.u + system.p, [*x, *zero_u, *p])
+            undefined = [k for k, v in enumerate(mp) if not v == v or abs(v) == float("inf")]
+            if undefined:
+                i, j = entries[undefined[0]]
+                nonfinite.append({"entry": _entry_name(system, i, j), "point": point})
+                continue
+            vals = np.array(vals)
+            for nb in range(len(blocks)):
+                ks = [k for k, w in enumerate(where) if w[0] == nb]
+                if not np.all(np.isfinite(vals[ks])):
+                    vals[ks] = scaled_block([mp[k] for k in ks])[0]
+                    scaled.add(nb)
         mats = [np.zeros((len(b), len(b))) for b in blocks]
         for (nb, a, c), v in zip(where, vals):
             mats[nb][a, c] = mats[nb][c, a] = v
-        for b, Mb in zip(blocks, mats):
+        for nb, (b, Mb) in enumerate(zip(blocks, mats)):
             ev = np.linalg.eigvalsh(Mb)
             scale = float(np.max(np.abs(ev))) if len(ev) else 1.0
             if worst is None or ev[0] / max(scale, 1e-300) < worst["min_eig"] / max(worst["scale"], 1e-300):
-                pnames = [s.name for s in system.states]
-                point = dict(zip(pnames, x))
-                if with_params:
-                    point.update(dict(zip(system.param_names, p)))
-                worst = {"min_eig": float(ev[0]), "scale": scale, "point": point, "block": [_zname(system, i) for i in b]}
+                worst = {"min_eig": float(ev[0]), "scale": scale, "point": point,
+                         "block": [_zname(system, i) for i in b], "mpmath": nb in scaled,
+                         "entry": _negative_entry(system, b, Mb)}
+    if worst is None and (nonfinite or outside):
+        worst = {"min_eig": float("nan"), "scale": 1.0, "point": nonfinite[0]["point"] if nonfinite else {},
+                 "block": [], "mpmath": False, "entry": ""}
+    if worst is not None:
+        worst.update(nonfinite=nonfinite, outside=outside)
     return worst
+
+
+def _entry_name(system, i: int, j: int) -> str:
+    """``R[i,j]`` (or P, S) of the dissipation matrix, with the resistive elements acting on it."""
+    n = len(system.states)
+    name = "R" if i < n and j < n else "S" if i >= n and j >= n else "P"
+    a, b = (i if i < n else i - n), (j if j < n else j - n)
+    if name == "P" and i >= n:
+        a, b = j, i - n
+    labels = [lab for lab, ent in system.dissipators if (min(i, j), max(i, j)) in ent]
+    return f"{name}[{a},{b}]" + (f" ({', '.join(map(repr, labels))})" if labels else "")
+
+
+def _negative_entry(system, b, Mb) -> str:
+    """The most negative diagonal entry of a block, named (the usual culprit of a negative eigenvalue)."""
+    d = np.diag(Mb)
+    if not len(d) or d.min() >= 0:
+        return ""
+    a = int(np.argmin(d))
+    return _entry_name(system, b[a], b[a])
 
 
 def _zname(system, i: int) -> str:
@@ -149,52 +197,132 @@ def _zname(system, i: int) -> str:
 
 
 def _symbolic_psd(Mb: sp.Matrix) -> bool | None:
-    """True if every principal minor is provably >= 0 under the symbols' assumptions."""
+    """True if every principal minor is provably >= 0 under the symbols' assumptions (None: undecided)."""
+    return _symbolic_psd_why(Mb)[0]
+
+
+def _symbolic_psd_why(Mb: sp.Matrix) -> tuple[bool | None, str]:
+    """:func:`_symbolic_psd` and, when undecided, why: too large, or a minor over the symbolic budget."""
     k = Mb.rows
     if k > 5:
-        return None
+        return None, f"block of {k} too large for principal minors"
+    if not affordable(Mb):
+        return None, "an entry is over the symbolic budget"
     for r in range(1, k + 1):
         for idx in itertools.combinations(range(k), r):
             minor = Mb.extract(list(idx), list(idx)).det(method="berkowitz")
-            minor = sp.factor(sp.expand(minor)) if minor.free_symbols else minor
+            if minor.free_symbols:
+                if expanded_terms(minor) > 4 * MAX_TERMS:
+                    return None, f"a {r}x{r} principal minor is over the symbolic budget ({MAX_TERMS} terms)"
+                minor = sp.factor(sp.expand(minor))
             nn = minor.is_nonnegative
             if nn is None:
                 nn = sp.expand(minor).is_nonnegative
             if nn is not True:
-                return None if nn is None else False
-    return True
+                return (None, "a principal minor is not provably nonnegative") if nn is None else (False, "")
+    return True, ""
+
+
+def _differs(system, a, b, what: str, sampled: dict, k: int = 8) -> bool:
+    """Whether ``a != b`` identically: symbolic within the budget, else at ``k`` sampled points (noted in ``sampled``)."""
+    z = is_zero(a - b)
+    if z is not None:
+        return not z
+    args = system.x + system.u + system.p
+    pts = system.sample_box(k, seed=0)
+    zero_u, pv = [0.0] * len(system.u), list(system.param_vector())
+    for x in pts:
+        va, vb = mp_values([a, b], args, [*x, *zero_u, *pv])
+        if va == va and vb == vb and abs(va - vb) > 1e-9 * max(abs(va), abs(vb), 1e-300):
+            return True
+    sampled.setdefault(what, f"{what} over the symbolic budget ({MAX_TERMS} terms): equal at {k} sampled points")
+    return False
+
+
+def structure_problems(system, problems: list[str]) -> dict[str, str]:
+    """Add to ``problems`` what makes ``system`` no port-Hamiltonian system (used by its constructor).
+
+    J and N skew, [[R, P], [P^T, S]] symmetric: decided symbolically within the budget of
+    :mod:`phs._budget`, else at sampled points; then the dissipation matrix at 8 sampled points of the
+    declared ranges (mpmath where floats overflow): a negative eigenvalue is a problem, and so is an
+    entry undefined at every sampled point inside the validity domain.  Returns ``{check: note}`` for
+    the checks decided by sampling.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> problems = []
+    >>> structure_problems(rc_circuit(), problems), problems
+    ({}, [])
+    """
+    sampled: dict[str, str] = {}
+
+    def pairs(M):
+        return sorted({(min(i, j), max(i, j)) for (i, j) in M.todok() if i != j})
+
+    names = system.state_names + system.input_names
+    J, D, N = system.J, system.dissipation_matrix, system.N
+    for i, j in pairs(J):
+        if _differs(system, J[i, j], -J[j, i], "J skew-symmetric", sampled):
+            total = J[i, j] + J[j, i]
+            shown = sp.simplify(total) if affordable(total) else "not zero at a sampled point"
+            problems.append(f"J is not skew-symmetric: J[{i},{j}] + J[{j},{i}] = {shown} ({names[i]}, {names[j]})")
+    for i in range(len(system.states)):
+        if J[i, i] != 0 and _differs(system, J[i, i], sp.Integer(0), "J skew-symmetric", sampled):
+            problems.append(f"J is not skew-symmetric: J[{i},{i}] = {J[i, i]} ({names[i]})")
+    for i, j in pairs(D):
+        if _differs(system, D[i, j], D[j, i], "R symmetric", sampled):
+            problems.append(f"R (with P, S) is not symmetric at entry ({i},{j}) ({names[i]}, {names[j]})")
+    for i, j in pairs(N):
+        if _differs(system, N[i, j], -N[j, i], "J skew-symmetric", sampled):
+            problems.append(f"N is not skew-symmetric at entry ({i},{j})")
+    if problems:
+        return sampled
+    worst = _psd_samples(system, k=8, seed=0)
+    if worst is None:
+        return sampled
+    if worst["min_eig"] < -1e-9 * max(1.0, worst["scale"]):
+        culprit = f": {worst['entry']} is negative there" if worst["entry"] else ""
+        how = " (evaluated with mpmath: it overflows in floating point)" if worst["mpmath"] else ""
+        problems.append(
+            f"R is not positive semidefinite: eigenvalue {worst['min_eig']:.3g} of [[R, P], [P^T, S]] in the block of "
+            + ", ".join(worst["block"]) + system._psd_culprits(worst["block"]) + culprit + how + " at "
+            + ", ".join(f"{k}={v:.4g}" for k, v in worst["point"].items()))
+    elif worst["nonfinite"] and worst["min_eig"] != worst["min_eig"]:
+        first = worst["nonfinite"][0]
+        problems.append(f"dissipation entry {first['entry']} is not finite at any of the 8 sampled points inside the "
+                        "validity domain (first at " + ", ".join(f"{k}={v:.4g}" for k, v in first["point"].items())
+                        + "): nothing shows it is positive semidefinite")
+    return sampled
 
 
 def check_system(system, samples: int = 200, seed: int = 0) -> CheckReport:
     """Run every structural check on ``system``; see :meth:`PHSystem.check`."""
     items: list[CheckItem] = []
-    items.append(CheckItem("J skew-symmetric", "pass", "symbolic", "J + J^T simplifies to zero"))
-    items.append(CheckItem("R symmetric", "pass", "symbolic", "[[R, P], [P^T, S]] equals its transpose"))
+    sampled = dict(getattr(system, "_sampled_structure", {}))
+    for name, what in (("J skew-symmetric", "J + J^T simplifies to zero"),
+                       ("R symmetric", "[[R, P], [P^T, S]] equals its transpose")):
+        if name in sampled:
+            items.append(CheckItem(name, "pass", "sampled (over the symbolic budget)", sampled[name]))
+        else:
+            items.append(CheckItem(name, "pass", "symbolic", what))
 
     D = system.dissipation_matrix
     blocks = _blocks(D)
-    undecided = []
-    failed = []
+    undecided, failed, why = [], [], []
     for b in blocks:
-        verdict = _symbolic_psd(D.extract(b, b))
+        verdict, reason = _symbolic_psd_why(D.extract(b, b))
         if verdict is None:
             undecided.append(b)
+            if "budget" in reason:
+                why.append(f"block {', '.join(_zname(system, i) for i in b)}: {reason}")
         elif verdict is False:
             failed.append(b)
     if not undecided and not failed:
         items.append(CheckItem("R positive semidefinite", "pass", "symbolic",
                                f"all principal minors of {len(blocks)} block(s) are nonnegative for positive parameters"))
     else:
-        worst = _psd_samples(system, k=samples, seed=seed, with_params=True, blocks=undecided + failed)
-        if worst is None:
-            items.append(CheckItem("R positive semidefinite", "undecided", "sampled", "no sample point inside the domain"))
-        else:
-            bad = worst["min_eig"] < -1e-9 * max(worst["scale"], 1e-300)
-            items.append(CheckItem(
-                "R positive semidefinite", "fail" if bad else "pass", f"sampled ({samples} points)",
-                f"smallest eigenvalue {worst['min_eig']:.4g} (block {', '.join(worst['block'])})",
-                {k: float(v) for k, v in worst["point"].items()},
-            ))
+        items.append(_sampled_psd_item(system, samples, seed, undecided + failed, why))
 
     # H bounded below: symbolic where possible, else minimised over the state box and followed outward
     bound = bounded_below(system, samples=samples, seed=seed)
@@ -222,6 +350,30 @@ def check_system(system, samples: int = 200, seed: int = 0) -> CheckReport:
         items.append(CheckItem("validity domain", "pass", f"sampled ({samples} points)",
                                f"{inside}/{total} sampled states satisfy all {len(system.conditions)} conditions"))
     return CheckReport(system.name, tuple(items))
+
+
+def _sampled_psd_item(system, samples: int, seed: int, blocks, why: list[str]) -> CheckItem:
+    """The PSD check decided by sampling: a negative eigenvalue fails, a non-finite sample is no pass."""
+    worst = _psd_samples(system, k=samples, seed=seed, with_params=True, blocks=blocks)
+    method = f"sampled ({samples} points)" + (f"; symbolic decision refused: {'; '.join(why)}" if why else "")
+    name = "R positive semidefinite"
+    if worst is None or (worst["min_eig"] != worst["min_eig"] and not worst["nonfinite"]):
+        return CheckItem(name, "undecided", method, "no sample point inside the validity domain")
+    point = {k: float(v) for k, v in worst["point"].items()}
+    if worst["min_eig"] < -1e-9 * max(worst["scale"], 1e-300):
+        culprit = f": {worst['entry']} is negative there" if worst["entry"] else ""
+        how = " (overflows in floating point: evaluated with mpmath, block scaled by its largest entry)" \
+            if worst["mpmath"] else ""
+        return CheckItem(name, "fail", method, f"smallest eigenvalue {worst['min_eig']:.4g} (block "
+                         f"{', '.join(worst['block'])}){culprit}{how}", point)
+    if worst["nonfinite"]:
+        first = worst["nonfinite"][0]
+        at = ", ".join(f"{k}={v:.4g}" for k, v in first["point"].items())
+        return CheckItem(name, "undecided", method, f"{first['entry']} is not finite (even with mpmath) at "
+                         f"{len(worst['nonfinite'])} of {samples} sampled points, first at {at}: no evidence there",
+                         {k: float(v) for k, v in first["point"].items()})
+    return CheckItem(name, "pass", method, f"smallest eigenvalue {worst['min_eig']:.4g} (block "
+                     f"{', '.join(worst['block'])})", point)
 
 
 def unit_problems(system) -> list[str]:

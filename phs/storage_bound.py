@@ -34,6 +34,8 @@ import numpy as np
 import scipy.optimize
 import sympy as sp
 
+from phs._budget import affordable
+
 #: box widths to which H is followed outward from a minimum on a face of the box
 REACH = 64.0
 
@@ -87,6 +89,8 @@ def _provably_bounded(expr: sp.Expr, states: list[sp.Symbol]) -> bool:
     expr = sp.sympify(expr)
     if expr.is_nonnegative:
         return True
+    if not affordable(expr):
+        return False  # over the symbolic budget: not expanded, decided over the box instead
     return all(_part_bounded(part, states) for part in _parts(expr, states))
 
 
@@ -226,19 +230,24 @@ def bounded_below(system, samples: int = 200, seed: int = 0) -> Bound:
     ('fail', -1.0)
     """
     states = list(system.x)
+    refused = [t.label for t in system.energy_terms if not sp.sympify(t.expr).is_nonnegative and not affordable(t.expr)]
     if all(_provably_bounded(t.expr, states) for t in system.energy_terms):
         return Bound("pass", "symbolic", "every energy term is nonnegative or an even polynomial with a positive "
                      "leading coefficient: H is bounded below everywhere")
     lo = np.array([s.range[0] for s in system.states], dtype=float)
     hi = np.array([s.range[1] for s in system.states], dtype=float)
     evaluate, conditions = _evaluator(system)
-    x, h = _minimise(evaluate, _valid_sample(system, conditions, lo, hi, samples, seed), lo, hi)
+    X = _valid_sample(system, conditions, lo, hi, samples, seed)
+    x, h = _minimise(evaluate, X, lo, hi)
     names = [s.name for s in system.states]
+    refusal = f"; symbolic decision refused (energy term {', '.join(map(repr, refused))} over the budget)" if refused else ""
     if x is None:
-        return Bound("undecided", f"sampled ({samples} points)", "H is not finite at any valid point of the state box")
+        return Bound("undecided", f"sampled ({samples} points){refusal}", "H is not finite at any valid point of the state box")
     point = {n: float(v) for n, v in zip(names, x)}
     on_face, beyond, h_far, x_far = follow_outward(evaluate, x, h, lo, hi)
-    method = f"numeric ({samples} samples + L-BFGS-B over the state box, followed {REACH:g} box widths outward)"
+    method = f"numeric ({samples} samples + L-BFGS-B over the state box, followed {REACH:g} box widths outward){refusal}"
+    inside = np.all(conditions(X), axis=1)
+    undefined = int(np.sum(inside & np.isnan(evaluate(X))))
     far = ", ".join(f"{n} = {v:.4g}" for n, v in zip(names, x_far) if v != point[n])
     if on_face:
         return Bound("fail", method, f"H is unbounded below: its minimum {h:.6g} J over the state box lies on the box's "
@@ -248,6 +257,11 @@ def bounded_below(system, samples: int = 200, seed: int = 0) -> Bound:
         return Bound("undecided", method, f"bounded on the stated box only: minimum {h:.6g} J inside it, but H is unbounded "
                      f"below outside it ({h_far:.6g} J at {far}); a storage function only while the state stays in the box",
                      h, point)
+    if undefined:
+        first = X[inside & np.isnan(evaluate(X))][0]
+        return Bound("undecided", method, f"H is not finite at {undefined} of {len(X)} sampled states inside the "
+                     "validity domain (first at " + ", ".join(f"{n} = {v:.4g}" for n, v in zip(names, first))
+                     + f"): no evidence there; minimum {h:.6g} J over the other points", h, point)
     on_face = bool(np.any((x <= lo + 1e-6 * (hi - lo)) | (x >= hi - 1e-6 * (hi - lo))))
     return Bound("pass", method, f"minimum {h:.6g} J over the state box" + (
         " (on its face; H levels off or is undefined outside)" if on_face else "")

@@ -161,6 +161,7 @@ class PHSystem:
             name,
         )
         self.conditions = tuple(conditions) + tuple(c for c in auto if c.expr not in {k.expr for k in conditions})
+        self._sampled_structure = FrozenDict()
         self._check_symbols(problems)
         if not problems:
             self._check_structure(problems)
@@ -435,45 +436,11 @@ class PHSystem:
             look(c.expr, f"condition {c.label!r}", known_u)
 
     def _check_structure(self, problems: list[str]) -> None:
-        def pairs(M):
-            """Index pairs (i < j) where M or its transpose has a nonzero entry."""
-            keys = set()
-            for (i, j) in M.todok():
-                if i != j:
-                    keys.add((min(i, j), max(i, j)))
-            return sorted(keys)
+        """J, N skew and D symmetric (symbolic within the budget of :mod:`phs._budget`, else sampled); D not
+        negative (nor undefined) at sampled points of the declared ranges."""
+        from phs.checks import structure_problems  # local import: checks uses PHSystem
 
-        def differs(a, b) -> bool:
-            d = a - b
-            return d != 0 and sp.expand(d) != 0 and sp.simplify(d) != 0
-
-        names = self.state_names + self.input_names
-        for i, j in pairs(self.J):
-            if differs(self.J[i, j], -self.J[j, i]):
-                problems.append(f"J is not skew-symmetric: J[{i},{j}] + J[{j},{i}] = {sp.simplify(self.J[i, j] + self.J[j, i])} "
-                                f"({names[i]}, {names[j]})")
-        for i in range(len(self.states)):
-            if self.J[i, i] != 0 and sp.simplify(self.J[i, i]) != 0:
-                problems.append(f"J is not skew-symmetric: J[{i},{i}] = {self.J[i, i]} ({names[i]})")
-        D = self.dissipation_matrix
-        for i, j in pairs(D):
-            if differs(D[i, j], D[j, i]):
-                problems.append(f"R (with P, S) is not symmetric at entry ({i},{j}) ({names[i]}, {names[j]})")
-        for i, j in pairs(self.N):
-            if differs(self.N[i, j], -self.N[j, i]):
-                problems.append(f"N is not skew-symmetric at entry ({i},{j})")
-        if problems:
-            return
-        # numeric PSD test at sampled points of the declared ranges: refuse what is certainly wrong
-        from phs.checks import _psd_samples  # local import: checks uses PHSystem
-
-        worst = _psd_samples(self, k=8, seed=0)
-        if worst is not None and worst["min_eig"] < -1e-9 * max(1.0, worst["scale"]):
-            problems.append(
-                f"R is not positive semidefinite: eigenvalue {worst['min_eig']:.3g} of [[R, P], [P^T, S]] in the block of "
-                + ", ".join(worst["block"]) + self._psd_culprits(worst["block"]) + " at "
-                + ", ".join(f"{k}={v:.4g}" for k, v in worst["point"].items())
-            )
+        self._sampled_structure = FrozenDict(structure_problems(self, problems))
 
     def _psd_culprits(self, block_names) -> str:
         """The resistive elements acting on a block, and their parameters with negative values."""

@@ -10,11 +10,12 @@ from codegen.passivity._box import EIGENVALUE_TOL, _Box, _min_eig, _point, _refe
 from codegen.passivity._model import _Model
 from codegen.passivity._result import PassivityTest
 from codegen.passivity._search import _closure, _minimise
+from phs._budget import is_zero
 
 
 def _interconnection(system, checks) -> PassivityTest:
     item = checks["J skew-symmetric"]
-    nskew = all(sp.simplify(e) == 0 for e in (system.N + system.N.T))
+    nskew = all(is_zero(e) is not False for e in (system.N + system.N.T))  # None: sampled by the constructor
     verdict = "pass" if item.verdict == "pass" and nskew else "fail"
     return PassivityTest("interconnection", verdict, "symbolic",
                          "J(x) + J(x)^T and N + N^T simplify to zero: the interconnection is power-preserving"
@@ -39,7 +40,7 @@ def _sign_violations(system, box: _Box) -> list[str]:
 def _symbolic_dissipation(system, checks, violations):
     """(True/False/None, how): D ⪰ 0 proved symbolically (principal minors of its blocks, or of each resistive
     element's form when they sum to D), refuted, or undecided."""
-    from phs.checks import _symbolic_psd
+    from phs.checks import _symbolic_psd_why
 
     if violations:
         return None, f"symbolic proof not applicable: declared positive but {', '.join(violations)}"
@@ -61,12 +62,12 @@ def _symbolic_dissipation(system, checks, violations):
             if i != j:
                 total[j, i] += v
         forms.append((label, M))
-    if any(sp.expand(e) != 0 for e in (total - D)):
-        return None, "undecided symbolically (the resistive elements' forms do not sum to D)"
+    if any(is_zero(e) is not True for e in (total - D)):
+        return None, "undecided symbolically (the resistive elements' forms do not sum to D, or are over the budget)"
     for label, M in forms:
-        verdict = _symbolic_psd(M)
+        verdict, why = _symbolic_psd_why(M)
         if verdict is not True:
-            return None, f"undecided symbolically (the form of {label!r} is not provably PSD)"
+            return None, f"undecided symbolically (the form of {label!r} is not provably PSD{': ' + why if why else ''})"
     return True, f"D is the sum of {len(forms)} resistive elements' forms, each with nonnegative principal minors"
 
 
@@ -100,7 +101,7 @@ def _dissipation(model: _Model, box: _Box, V, X, P, valid, starts, seed, symboli
     Dk = model.D(X, P)
     lamD, worstD, wD, lam, ends, runs, ok = _eig_search(model, box, V, Dk, valid, starts, seed, sD, model.D_deps)
     if worstD is None:
-        t = PassivityTest("dissipation", "undecided", "sampled", "D is not finite at any valid point of the box",
+        t = PassivityTest("dissipation", "undecided", "sampled", f"D is not finite at any valid point of the box (floating point); {how}",
                           {"samples": int(len(V)), "valid_samples": int(np.sum(valid))})
         return t, _feedthrough(model, box, None, None, None), float("nan")
     negative = lamD < -EIGENVALUE_TOL or sym is False
@@ -167,7 +168,7 @@ def _feedthrough(model: _Model, box: _Box, Dk, valid, scale) -> PassivityTest:
     if zero:
         return PassivityTest("feedthrough", "pass", "symbolic", "no feedthrough (P = S = N = 0): the full-form "
                              "condition reduces to R ⪰ 0", {})
-    nskew = all(sp.simplify(e) == 0 for e in (system.N + system.N.T))
+    nskew = all(is_zero(e) is not False for e in (system.N + system.N.T))
     numbers: dict = {"N_skew": bool(nskew)}
     s_idx = [a for a, i in enumerate(model.support) if i >= nx]
     r_idx = [a for a, i in enumerate(model.support) if i < nx]

@@ -46,6 +46,7 @@ from codegen.passivity import (
 )
 from phs import EquilibriumError, InputDataError, InputInfo, Param, ParameterError, PHSystem, StateInfo
 from phs.signals import square
+from systems.examples import rc_circuit
 
 QUICK = {"samples": 400, "starts": 3}
 
@@ -178,6 +179,23 @@ def test_state_dependent_R_losing_definiteness_is_found_where_it_is_negative():
     # the optimiser goes to the box edge, where b(v) is most negative: b0 (1 - (1.2 / 0.8)^2) = -1.25 b0
     assert abs(v) == pytest.approx(1.2, rel=1e-6)
     assert diss.numbers["min_eigenvalue_unscaled"] == pytest.approx(0.05 * (1 - 1.5**2), rel=1e-6)
+
+
+def test_dissipation_over_the_symbolic_budget_finishes_and_is_not_a_pass():
+    """R = (Q+R+2)**120 - (Q+R+1)**120 (positive, ~1e359: inf - inf = nan in floating point): the certificate
+    once hung in the symbolic minors; now it refuses them as over the budget, cannot sample D in floats, and says
+    both instead of passing (measured 0.3 s; bound 20 s for a loaded machine)."""
+    rc = rc_circuit()
+    s = sp.Symbol("C.Q", real=True) + sp.Symbol("R.R", positive=True)
+    entry = (s + 2) ** 120 - (s + 1) ** 120
+    system = rc._replace(R=sp.Matrix([[entry]]), dissipators=(("R", {(0, 0): entry, (0, 1): rc.P[0, 0],
+                                                                     (1, 1): rc.S[0, 0]}),))
+    t = time.perf_counter()
+    report = certify(system, samples=64, starts=1)
+    assert time.perf_counter() - t < 20.0
+    diss = report["dissipation"]
+    assert not report.passive and diss.verdict == "undecided"
+    assert "not finite" in diss.summary and "over the symbolic budget" in diss.summary
 
 
 def test_coupled_R_is_indefinite_only_off_its_diagonal():
