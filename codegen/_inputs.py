@@ -16,7 +16,7 @@ from numbers import Real
 import numpy as np
 import sympy as sp
 
-from codegen._interpolants import _interpolant, interpolation, sampled_digest
+from codegen._interpolants import interpolation, sampled_digest, spline_values
 from phs.errors import InputDataError
 from phs.params import TIME
 from phs.signals import Constant, Piecewise, Sampled, Signal, as_signal
@@ -349,11 +349,10 @@ def segment_inputs(sigs, slots, choice, times, cache: dict, max_step: float = 1.
 
 def _spline_values(sg, times) -> np.ndarray:
     """The B-spline interpolant of the samples of ``sg`` at ``times`` (the integrator's own)."""
-    f = _interpolant(*sg.arrays, "bspline", sampled_digest(sg))
     times = np.asarray(times, float)
     out = np.asarray(sg(times), dtype=float).reshape(-1)
     grid = sg.arrays[0]
     inside = (times > grid[0]) & (times < grid[-1])  # CasADi's B-spline is 0 on its last knot; the ends are samples
     if inside.any():
-        out[inside] = np.asarray(f(times[inside].reshape(1, -1)), dtype=float).reshape(-1)
+        out[inside] = spline_values(*sg.arrays, sampled_digest(sg), times[inside])
     return out
