@@ -209,6 +209,72 @@ def write_atomic(path, data: str | bytes) -> None:
         raise
 
 
+def write_all_atomic(files, commit=None) -> None:
+    """Write several files all or nothing: each to a temporary file beside it, then every rename.
+
+    ``files`` maps paths to their text or bytes, or to a function ``write(path)`` that writes the
+    file at the path it is given (the temporary one).  When any temporary file cannot be written, every
+    one written so far is removed and no destination changes.  ``commit`` (a context manager
+    factory, optional) wraps the renames, e.g. to hold back interrupts while they run.
+
+    Raises
+    ------
+    InputDataError
+        Naming the first file that cannot be written (nothing is written then).
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     write_all_atomic({os.path.join(d, "a.txt"): "A", os.path.join(d, "b.txt"): b"B"})
+    ...     sorted(os.listdir(d))
+    ['a.txt', 'b.txt']
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     try:
+    ...         write_all_atomic({os.path.join(d, "a.txt"): "A", os.path.join(d, "no", "b.txt"): "B"})
+    ...     except InputDataError as exc:
+    ...         print(os.listdir(d), str(exc).startswith("cannot write"))
+    [] True
+    """
+    import contextlib
+
+    staged = []
+    try:
+        for path, data in files.items():
+            path = os.fspath(path)
+            d = os.path.dirname(os.path.abspath(path))
+            if not os.path.isdir(d):
+                raise InputDataError(f"cannot write {path!r}: directory {d!r} does not exist")
+            try:
+                fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.splitext(path)[1], dir=d)
+            except OSError as exc:
+                raise InputDataError(f"cannot write {path!r}: {exc.strerror}") from None
+            staged.append((tmp, path))
+            try:
+                with os.fdopen(fd, "wb") as fh:
+                    if not callable(data):
+                        fh.write(data.encode("utf-8") if isinstance(data, str) else data)
+                        fh.flush()
+                        os.fsync(fh.fileno())
+                if callable(data):
+                    data(tmp)
+                os.chmod(tmp, os.stat(path).st_mode & 0o777 if os.path.exists(path) else 0o644)
+            except OSError as exc:
+                raise InputDataError(f"cannot write {path!r}: {exc.strerror or exc}") from None
+        with commit() if commit is not None else contextlib.nullcontext():
+            while staged:
+                tmp, path = staged[0]
+                try:
+                    os.replace(tmp, path)
+                except OSError as exc:
+                    raise InputDataError(f"cannot write {path!r}: {exc.strerror or exc}") from None
+                staged.pop(0)
+    finally:
+        for tmp, _ in staged:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+
+
 # -- reading ------------------------------------------------------------------------------
 class _Reader:
     """Reads one saved file; every problem becomes one InputDataError naming the file and the JSON field."""

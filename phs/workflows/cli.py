@@ -6,7 +6,8 @@ Each subcommand is defined in its workflow's own module (``phs.workflows.simulat
 Errors the project raises on purpose (:class:`~phs.errors.PHSError`) are printed as one line
 ``phs: error: <message>`` with exit code 2, and no output file is written; an integrator's failure is
 printed in words (what happened, where, what to try: :mod:`codegen._solver_errors`), never as its
-return flag alone or the C++ file that reported it.
+return flag alone or the C++ file that reported it.  SIGINT and SIGTERM stop every subcommand with exit
+code 130 and 143 (:mod:`phs.workflows.interrupts`), writing nothing for the work in flight.
 
 Examples
 --------
@@ -78,7 +79,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns
     -------
     int
-        0 on success, 2 on a usage error or an error naming bad input.
+        0 on success, 2 on a usage error or an error naming bad input, 130 after SIGINT and 143 after
+        SIGTERM (:mod:`phs.workflows.interrupts`: nothing is written for the work in flight).
 
     Examples
     --------
@@ -90,24 +92,34 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, --version and usage errors
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_ERROR)
-    try:
-        return args.run(args)
-    except PHSError as exc:
-        print(f"phs: error: {_one_line(str(exc))}", file=sys.stderr)
-        return EXIT_ERROR
-    except RuntimeError as exc:  # an integrator's failure that reached here unnamed: in words, not its C++ source
-        from codegen._solver_errors import failure_code
+    from phs.workflows.interrupts import Interrupted, received, watching
 
-        if failure_code(exc) is None:
-            raise
-        print(f"phs: error: {_one_line(str(exc))}", file=sys.stderr)
-        return EXIT_ERROR
-    except OSError as exc:
-        print(f"phs: error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
-    except KeyboardInterrupt:
-        print("phs: interrupted", file=sys.stderr)
-        return 130
+    with watching():  # SIGINT and SIGTERM stop the command, even inside an integrator that swallows them
+        try:
+            return args.run(args)
+        except Interrupted as exc:
+            return _interrupted(exc.signum)
+        except KeyboardInterrupt:
+            return _interrupted(2)
+        except (PHSError, RuntimeError, OSError) as exc:
+            if received() is not None:  # a solver's failure caused by the signal: the signal is the news
+                return _interrupted(received())
+            if isinstance(exc, RuntimeError):  # an integrator's failure that reached here unnamed: in words
+                from codegen._solver_errors import failure_code
+
+                if failure_code(exc) is None:
+                    raise
+            print(f"phs: error: {_one_line(str(exc))}", file=sys.stderr)
+            return EXIT_ERROR
+
+
+def _interrupted(signum: int) -> int:
+    """Say that the command was stopped by ``signum``; its exit code, 128 + signum (130 SIGINT, 143 SIGTERM)."""
+    import signal
+
+    print(f"phs: interrupted ({signal.Signals(signum).name}); nothing was written for the work in flight",
+          file=sys.stderr)
+    return 128 + signum
 
 
 if __name__ == "__main__":

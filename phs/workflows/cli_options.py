@@ -56,13 +56,68 @@ def _time_grid(t_end: float, dt: float | None) -> np.ndarray:
 
 
 def _check_writable(*paths: str | None) -> None:
-    """Fail before any work when an output's directory does not exist."""
+    """Fail before any work when an output cannot be written: its directory is missing or not writable,
+    or the path is a directory.
+
+    Examples
+    --------
+    >>> _check_writable(None, "here.csv")
+    >>> _check_writable("no/such/dir/r.csv")
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: cannot write 'no/such/dir/r.csv': directory ... does not exist
+    """
     for path in paths:
         if path is None:
             continue
         d = os.path.dirname(os.path.abspath(path))
         if not os.path.isdir(d):
             raise InputDataError(f"cannot write {path!r}: directory {d!r} does not exist")
+        if os.path.isdir(path):
+            raise InputDataError(f"cannot write {path!r}: it is a directory")
+        if not os.access(d, os.W_OK | os.X_OK):
+            raise InputDataError(f"cannot write {path!r}: directory {d!r} is not writable")
+
+
+def _check_distinct(*options: tuple[str, str | None]) -> None:
+    """Refuse outputs given as ``(option, path)`` pairs when two of them name the same file.
+
+    Examples
+    --------
+    >>> _check_distinct(("--out", "a.csv"), ("--plot", "a.png"), ("--json", None))
+    >>> _check_distinct(("--out", "x.csv"), ("--plot", "./x.csv"))
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: --out and --plot both name './x.csv': give each output its own file
+    """
+    seen: dict[str, str] = {}
+    for option, path in options:
+        if path is None:
+            continue
+        key = os.path.normcase(os.path.realpath(path))
+        if key in seen:
+            raise InputDataError(f"{seen[key]} and {option} both name {os.fspath(path)!r}: give each output its own file")
+        seen[key] = option
+
+
+def _write_outputs(files: dict) -> None:
+    """Write a command's prepared outputs ``{path: text or bytes}`` all or nothing
+    (:func:`phs.io.write_all_atomic`); a signal received before the renames stops the command with
+    nothing written (:mod:`phs.workflows.interrupts`).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _write_outputs({os.path.join(d, "r.json"): "{}"})
+    ...     os.listdir(d)
+    ['r.json']
+    """
+    from phs.io import write_all_atomic
+    from phs.workflows.interrupts import check, deferred
+
+    check()
+    write_all_atomic(files, commit=deferred)
 
 
 def _name_list(text: str | None, option: str) -> list[str]:

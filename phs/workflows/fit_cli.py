@@ -9,10 +9,10 @@ import json
 import os
 
 from phs.errors import InputDataError
-from phs.io import write_atomic
-from phs.workflows.cli_options import _check_writable, _finite_or_none, _positive
+from phs.workflows.cli_options import _check_distinct, _check_writable, _finite_or_none, _positive, _write_outputs
 from phs.workflows.cli_recordings import add_recording_options, model_and_recordings
 from phs.workflows.cli_vocabulary import _add_model_options, add_option
+from phs.workflows.interrupts import check
 
 
 def add_subcommand(sub) -> None:
@@ -45,14 +45,16 @@ def run_fit(args: argparse.Namespace) -> int:
     """Run ``phs fit`` with parsed arguments; returns the exit code.
 
     Every check, the fit, the validation, the sensitivity table and every output (figure,
-    markdown, summary, JSON) are prepared in memory before the first file is written, so an
-    error writes nothing.
+    markdown, summary, JSON) are prepared in memory and every destination is checked (writable, no
+    two on the same file) before the first file is written, so an error or an interrupt writes nothing.
     """
+    report_files = [os.path.join(args.report, n) for n in _REPORT] if args.report is not None else []
+    _check_distinct(("--json", args.json), *(("--report", f) for f in report_files))
     _check_writable(args.json)
     if args.report is not None:
         if os.path.exists(args.report) and not os.path.isdir(args.report):
             raise InputDataError(f"--report {args.report!r} exists and is not a directory")
-        _check_writable(os.path.join(args.report, "summary.txt") if os.path.isdir(args.report) else args.report)
+        _check_writable(*(report_files if os.path.isdir(args.report) else [args.report]))
     system, rec, val, free, fitted_outputs, x0 = model_and_recordings(args)
 
     # imported here: casadi is only needed once a model runs
@@ -72,14 +74,23 @@ def run_fit(args: argparse.Namespace) -> int:
     document = _fit_json(args, result, val, sensitivity) if args.json else None
     print(summary)
 
-    if args.report is not None:
-        os.makedirs(args.report, exist_ok=True)
-        write_atomic(os.path.join(args.report, "fit.png"), png)
-        write_atomic(os.path.join(args.report, "sensitivity.md"), markdown)
-        write_atomic(os.path.join(args.report, "summary.txt"), summary + "\n")
+    files = dict(zip(report_files, (png, markdown, summary + "\n"), strict=True)) if args.report is not None else {}
     if document is not None:
-        write_atomic(args.json, document)
+        files[args.json] = document
+    created = args.report is not None and not os.path.isdir(args.report)
+    check()  # an interrupt the integrator swallowed stops the command before anything is written
+    try:
+        if created:
+            os.makedirs(args.report)
+        _write_outputs(files)
+    except BaseException:
+        if created and os.path.isdir(args.report) and not os.listdir(args.report):
+            os.rmdir(args.report)  # all or nothing: not even the report's directory
+        raise
     return 0
+
+
+_REPORT = ("fit.png", "sensitivity.md", "summary.txt")  # the files of --report DIR
 
 
 def _fit_summary_text(args: argparse.Namespace, result) -> str:

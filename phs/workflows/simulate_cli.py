@@ -17,10 +17,10 @@ import json
 import time
 
 from phs.errors import InputDataError
-from phs.io import write_atomic
-from phs.workflows.cli_options import _check_writable, _time_grid
+from phs.workflows.cli_options import _check_distinct, _check_writable, _time_grid, _write_outputs
 from phs.workflows.cli_vocabulary import _add_model_options, add_option
 from phs.workflows.inputs import between_notes, input_signals, parse_assignments
+from phs.workflows.interrupts import check
 from phs.workflows.loader import load_model
 
 
@@ -59,6 +59,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     """
     if args.out is None and args.plot is None:
         raise InputDataError("nothing to write: give --out FILE.csv (every signal), --plot FILE.png (a figure), or both")
+    _check_distinct(("--out", args.out), ("--plot", args.plot), ("--json", args.json))
     _check_writable(args.out, args.plot, args.json)
     t = _time_grid(args.t_end, args.dt)
     params = parse_assignments(args.param, "--param", numeric=True)
@@ -72,15 +73,17 @@ def run_simulate(args: argparse.Namespace) -> int:
     wall = time.perf_counter()
     res = simulate(system, t, u=u, x0=x0 or None, params=None, rtol=args.rtol, atol=args.atol)
     runtime = time.perf_counter() - wall
+    check()  # an interrupt the integrator swallowed (and may have recovered from) stops the command here
 
-    png = _figure_png(res) if args.plot else None
-    summary = _summary(args, res, runtime) if args.json else None
+    files = {}
     if args.out is not None:  # with how each input behaved between the samples: a fit of the file replays this run
-        res.to_csv(args.out, between=between_notes(system, args.input, u))
-    if png is not None:
-        write_atomic(args.plot, png)
-    if summary is not None:
-        write_atomic(args.json, json.dumps(summary, indent=1) + "\n")
+        notes = between_notes(system, args.input, u)
+        files[args.out] = lambda path: res.to_csv(path, between=notes)
+    if args.plot is not None:
+        files[args.plot] = _figure_png(res)
+    if args.json is not None:
+        files[args.json] = json.dumps(_summary(args, res, runtime), indent=1) + "\n"
+    _write_outputs(files)
     written = ", ".join(p for p in (args.out, args.plot, args.json) if p is not None)
     print(f"simulated {system.name!r}: {len(res.t)} samples to t = {res.t[-1]:g} s; wrote {written}")
     return 0

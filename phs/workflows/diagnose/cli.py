@@ -55,9 +55,11 @@ def run_diagnose(args: argparse.Namespace) -> int:
     """Run ``phs diagnose``; every output is prepared before the first file is written.  Returns 0, or
     :data:`EXIT_REFUSED` when the nominal model cannot describe the recording."""
     from components.candidates import LIBRARY
-    from phs.workflows.cli_options import _check_writable, _name_list
+    from phs.workflows.cli_options import _check_distinct, _check_writable, _name_list
     from phs.workflows.cli_recordings import model_and_recordings
 
+    report = [os.path.join(args.report, n) for n in _REPORT] if args.report else []
+    _check_distinct(("--json", args.json), ("--discover-out", args.discover_out), *(("--report", f) for f in report))
     _check_writable(args.json)
     if args.discover_out is not None:
         if args.discover is False:
@@ -83,6 +85,9 @@ def run_diagnose(args: argparse.Namespace) -> int:
     text = d.summary()
     document = to_json(d) if args.json else None
     emitted = d.discovered_source() if args.discover_out is not None and d.discovery is not None and d.discovery.found else None
+    from phs.workflows.interrupts import check
+
+    check()  # an interrupt an integrator swallowed stops the command before anything is written
     print(text)
     if args.report is not None:
         d.write_report(args.report)
@@ -103,3 +108,5 @@ def run_diagnose(args: argparse.Namespace) -> int:
 EXIT_REFUSED = 1
 """Exit code of ``phs diagnose`` when the nominal model cannot describe the recording (no effect named; one
 line on stderr says which channel and what to check)."""
+
+_REPORT = ("index.html", "fits.png", "hypotheses.png", "locate.png", "diagnosis.json", "summary.txt")  # --report DIR

@@ -36,8 +36,14 @@ import math
 import numpy as np
 
 from phs.errors import InputDataError, ParameterError, SimulationError
-from phs.io import write_atomic
-from phs.workflows.cli_options import _check_writable, _finite_or_none, _positive, _time_grid
+from phs.workflows.cli_options import (
+    _check_distinct,
+    _check_writable,
+    _finite_or_none,
+    _positive,
+    _time_grid,
+    _write_outputs,
+)
 from phs.workflows.cli_vocabulary import _add_model_options, add_option
 from phs.workflows.inputs import input_signals, parse_assignments
 from phs.workflows.loader import load_model
@@ -224,6 +230,9 @@ class _InputsOf:
     def __init__(self, system, specs, variables):
         self.system, self.specs, self.variables = system, list(specs), list(variables)
 
+    def __repr__(self) -> str:
+        return "; ".join(self.specs)
+
     def __call__(self, values: dict) -> dict:
         subs = {k: values[k] for k in self.variables}
         texts = []
@@ -237,9 +246,13 @@ class _InputsOf:
 def run_sweep(args) -> int:
     """Run ``phs sweep`` with parsed arguments; returns the exit code.
 
-    The study is checked completely (model, ranges, metrics, inputs, files) before the first run;
-    rows are then written to ``--out`` as runs finish, and the figure and JSON summary at the end.
+    The study is checked completely (model, ranges, metrics, inputs, files: writable, no two outputs
+    on the same file) before the first run; rows are then written to ``--out`` as runs finish, and
+    the figure and JSON summary at the end, both or neither.  SIGINT/SIGTERM keep the finished rows
+    (for ``--resume``) and write nothing else.
     """
+    sidecar = args.out + ".study.json" if args.out.lower().endswith(".csv") else None  # the CSV's study, beside it
+    _check_distinct(("--out", args.out), ("--out", sidecar), ("--plot", args.plot), ("--json", args.json))
     _check_writable(args.out, args.plot, args.json)
     if args.scheduler is not None and args.processes is not None:
         raise InputDataError("give either --processes (a local Dask cluster) or --scheduler ADDRESS, not both")
@@ -316,9 +329,9 @@ def run_sweep(args) -> int:
                   rtol=args.rtol, atol=args.atol)
     result = sweep(study, args.out, resume=args.resume, retry_failed=args.retry_failed, threads=args.threads,
                    processes=args.processes, scheduler=args.scheduler, chunk_size=args.chunk, progress=not args.quiet)
-    print(result.summary())
+    files = {}
     if args.plot is not None:
-        result.plot(args.plot)
+        files[args.plot] = result.plot  # rendered into a temporary file beside --plot, renamed with the others
     if args.json is not None:
         import phs
 
@@ -330,7 +343,9 @@ def run_sweep(args) -> int:
                "sampling": args.sampling, "params": params,
                "metric_ranges": {c: _range(result[c][result.ok]) for c in result.metrics},
                "failures": [{"run": r, "error": e} for r, e in result.failed[:50]]}
-        write_atomic(args.json, json.dumps(_finite_or_none(doc), indent=1, allow_nan=False) + "\n")
+        files[args.json] = json.dumps(_finite_or_none(doc), indent=1, allow_nan=False) + "\n"
+    _write_outputs(files)
+    print(result.summary())
     check_failures(result, args.max_failed)
     return 0
 

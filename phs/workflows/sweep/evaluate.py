@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from phs.errors import PHSError
+from phs.workflows.interrupts import check
 from phs.workflows.sweep.study import Study
 
 
@@ -48,6 +49,7 @@ class _Evaluator:
         if todo:
             res = self.batch.run(params, u=us if self.u_for is not None else self.u,
                                  x0=x0s if self.x0_for is not None else self.x0, signals=self.signals, n=len(todo))
+            check()  # an interrupt the integrators swallowed: these runs were stopped, not failed; no row is kept
             for pos, (run, values) in enumerate(todo):
                 err = res.errors[pos]
                 rows[run] = self._failed(run, values, _describe(err)) if err is not None else \

@@ -8,6 +8,7 @@ import time as _time
 import numpy as np
 
 from phs.errors import InputDataError
+from phs.workflows.interrupts import check, watching
 from phs.workflows.sweep.evaluate import _describe, _evaluate_chunk, _Evaluator, _failed_row
 from phs.workflows.sweep.metrics import column_units
 from phs.workflows.sweep.result import StudyResult
@@ -101,7 +102,8 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
     Raises
     ------
     InputDataError
-        When ``out`` exists without ``resume``, holds another study, has an unknown suffix, or the
+        When ``out`` exists without ``resume``, holds another study (the message names what differs:
+        :meth:`Study.identity`), has an unknown suffix, or the
         Dask scheduler cannot be reached.
 
     Examples
@@ -131,7 +133,7 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
             "casadi_version": casadi.__version__, "variables": study.variables,
             "metrics": [c for m in study.metrics for c in m.columns], "n_runs": study.n_runs, "seed": study.seed,
             "sampling": study.sampling, "samples": study.samples,
-            "units": column_units(study.system, study.metrics, study.variables)}
+            "units": column_units(study.system, study.metrics, study.variables), "identity": study.identity()}
 
     def design(run):
         return study.values(run) if 0 <= run < study.n_runs else None
@@ -142,6 +144,15 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
     distributed = scheduler is not None or processes is not None
     wall = _time.perf_counter()
     bar = _Progress(len(todo), progress, study.system.name)
+    with watching():  # SIGINT/SIGTERM: the finished runs are kept, the runs in flight leave no row
+        _run(study, todo, store, bar, distributed, threads, processes, scheduler, chunk_size)
+    seconds = _time.perf_counter() - wall
+    metrics = [c for m in study.metrics for c in m.columns]
+    return StudyResult(store.table(), study.variables, metrics, path=store.path, seconds=seconds,
+                       new_runs=len(todo), system_name=study.system.name, units=meta["units"])
+
+
+def _run(study, todo, store, bar, distributed, threads, processes, scheduler, chunk_size) -> None:
     try:
         if todo:
             if distributed:
@@ -153,16 +164,14 @@ def sweep(study: Study, out=None, *, resume: bool = False, retry_failed: bool = 
                 size = chunk_size or _chunk_size(study, len(todo), n_threads)
                 ev = _Evaluator(study, n_threads)
                 for chunk in _chunks(todo, size, exact=chunk_size is not None):
+                    check()
                     rows = ev([(k, study.values(k)) for k in chunk])
+                    check()
                     store.add(rows)
                     bar.update(rows)
     finally:
         bar.close()
         store.close()
-    seconds = _time.perf_counter() - wall
-    metrics = [c for m in study.metrics for c in m.columns]
-    return StudyResult(store.table(), study.variables, metrics, path=store.path, seconds=seconds,
-                       new_runs=len(todo), system_name=study.system.name, units=meta["units"])
 
 
 def _run_dask(study, todo, store, bar, scheduler, processes, threads, chunk_size) -> None:
@@ -204,10 +213,12 @@ def _run_dask(study, todo, store, bar, scheduler, processes, threads, chunk_size
         window = [f for f in (submit() for _ in range(2 * workers + 2)) if f is not None]
         queue = as_completed(window)
         for fut in queue:
+            check()
             chunk = runs_of.pop(fut.key)
             try:
                 rows = fut.result()
             except Exception as exc:  # a task lost with its worker, or failing outside any run
+                check()  # a worker stopped by the same signal: its runs were interrupted, not failed
                 rows = [_task_failed(study, k, exc) for k in chunk]
             store.add(rows)
             bar.update(rows)

@@ -20,7 +20,9 @@ running or whose part was not yet renamed into place; the dangerous moments
 (after a part's data reached the disk, before and after the rename of a part,
 before and after the rename of the results file) are each tested by a kill.
 Resuming reads ``OUT`` and the parts, checks that they belong to the same study
-(same variables and metric columns, same variable values for each run number),
+(the identity stored with them: model, parameters, inputs, time grid, initial state, tolerances,
+metrics and design, in the Parquet files' metadata or, for CSV, in ``OUT.study.json`` written
+before the first part; then the variables and metric columns and the variable values of each run),
 removes the leftover temporary files and runs only what is missing.
 """
 
@@ -211,7 +213,10 @@ class ResultStore:
     retry_failed : bool
         On resume, forget failed runs so they run again.
     metadata : dict
-        Written into Parquet files (model, variables, metrics, seed).
+        Written into Parquet files, and for CSV into ``OUT.study.json`` beside it (model, variables,
+        metrics, seed; under ``"identity"``, :meth:`Study.identity
+        <phs.workflows.sweep.study.Study.identity>`, compared on resume: another study is refused,
+        naming what differs).
     flush_seconds : float
         How often ``path`` is rewritten from the finished rows (0: after every part).
 
@@ -248,6 +253,8 @@ class ResultStore:
         if not os.path.isdir(d):
             raise InputDataError(f"cannot write {self.path!r}: directory {d!r} does not exist")
         self.parts = self.path + ".parts"
+        self.sidecar = self.path + ".study.json"  # the study a CSV file holds (Parquet files carry it inside)
+        self._described = False
         existing = os.path.exists(self.path) or os.path.isdir(self.parts)
         if existing and not resume:
             raise InputDataError(f"{self.path!r} already holds results (or the parts of an interrupted study): "
@@ -263,8 +270,16 @@ class ResultStore:
         if os.path.isdir(self.parts):
             sources += sorted(os.path.join(self.parts, f) for f in os.listdir(self.parts) if _is_part(f, self.fmt))
         want = _columns_of(self.numeric)
+        if self.fmt == "csv" and os.path.exists(self.sidecar):
+            try:
+                with open(self.sidecar, encoding="utf-8") as fh:
+                    described = json.load(fh)
+            except (OSError, ValueError) as exc:
+                raise InputDataError(f"{self.sidecar}: cannot read the study it describes ({exc})") from None
+            self._check_identity(described if isinstance(described, dict) else {})
         for src in sources:
-            rows, _meta = read_rows(src)
+            rows, meta = read_rows(src)
+            self._check_identity(meta)
             if rows:
                 have = list(rows[0])
                 if sorted(have) != sorted(want):
@@ -289,6 +304,18 @@ class ResultStore:
         if retry_failed:
             self._dirty = True
         self._remove_leftovers()
+
+    def _check_identity(self, stored: dict) -> None:
+        """Refuse to continue results of another study (:func:`~phs.workflows.sweep.study.identity_differences`)."""
+        from phs.workflows.sweep.study import identity_differences
+
+        have, want = (stored or {}).get("identity"), self.metadata.get("identity")
+        if not isinstance(have, dict) or not want:
+            return  # written before studies recorded their identity: the run-by-run design check remains
+        diff = identity_differences(have, want)
+        if diff:
+            raise InputDataError(f"{self.path!r} holds another study ({'; '.join(diff)}): resume only the same "
+                                 "study, or choose another output file")
 
     def _remove_leftovers(self) -> None:
         """Remove what a killed study left in its part directory besides its parts: the ``.tmp-*`` file of
@@ -320,6 +347,9 @@ class ResultStore:
             self.rows[int(r["run"])] = r
         if self.path is None:
             return
+        if self.fmt == "csv" and not self._described:  # before the first part: no row without its study
+            write_atomic(self.sidecar, json.dumps(self.metadata, indent=1) + "\n")
+            self._described = True
         os.makedirs(self.parts, exist_ok=True)
         # names sort in the order the parts were written: on resume a later row for a run wins
         name = f"part-{_time.time_ns():020d}-{uuid.uuid4().hex[:8]}.{self.fmt}"

@@ -198,6 +198,66 @@ class Study:
         assert all(len(v) == n for v in out.values())
         return out
 
+    def identity(self) -> dict:
+        """What makes this study the one it is, as stored with its results and compared on resume.
+
+        Fields: ``model_hash`` (structure and parameter names), ``params`` (every parameter's value
+        with the fixed overrides), ``inputs`` (a description and ``inputs_digest``, a digest of the
+        inputs sampled on the grid and between its points, for the first and last run), the time grid
+        (``t_start``, ``t_end``, ``samples``, ``t_digest``), ``x0``, the tolerances (``rtol``,
+        ``atol``, ``max_steps``), ``metrics`` (their columns) and the design (``variables``,
+        ``n_runs``, ``seed``, ``sampling``, ``samples_drawn``, ``design_digest`` of every run's values).  Resuming compares them with
+        :func:`identity_differences`.
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> a = Study(rc_circuit(), [0, 1e-3], u={"U": 1.0}, grid={"R.R": [1e3, 2e3]}, metrics=["final:v_C"])
+        >>> b = Study(rc_circuit(), [0, 2e-3], u={"U": 1.0}, grid={"R.R": [1e3, 2e3]}, metrics=["final:v_C"])
+        >>> a.identity()["metrics"], identity_differences(a.identity(), b.identity())
+        (['final_v_C'], ['t_end stored 0.001, requested 0.002'])
+        """
+        import hashlib
+
+        from codegen._inputs import input_signals, inputs_at
+
+        def digest(*arrays) -> str:
+            h = hashlib.sha256()
+            for a in arrays:
+                h.update(np.ascontiguousarray(np.asarray(a, dtype=float)).tobytes())
+            return h.hexdigest()[:16]
+
+        t = self.t
+        times = np.sort(np.concatenate([t, 0.5 * (t[1:] + t[:-1])]))
+        samples = []
+        for run in sorted({0, self.n_runs - 1}):
+            try:  # a user's function failing for a run fails that run when it runs, not the study here
+                u = self.u_for(self.values(run)) if self.u_for is not None else self.u
+                sigs = input_signals(self.system, u, t)
+                samples.append(inputs_at(sigs, times - t[0]) if len(sigs) else np.zeros(0))
+            except Exception:  # noqa: BLE001
+                samples.append(np.full(1, np.nan))
+        if self.x0_for is not None:
+            x0 = []
+            for run in sorted({0, self.n_runs - 1}):
+                try:
+                    x0.append(repr(self.x0_for(self.values(run))))
+                except Exception as exc:  # noqa: BLE001 - as above
+                    x0.append(f"failed: {type(exc).__name__}")
+        else:
+            x0 = None if self.x0 is None else repr(self.x0)
+        shown = self.u_for if self.u_for is not None else self.u
+        text = " ".join(repr(shown).split())
+        params = self.system.param_values()
+        params.update(self.params)
+        return {"model_hash": self.system.model_hash(), "params": {k: float(v) for k, v in params.items()},
+                "inputs": text if len(text) <= 120 else text[:117] + "...", "inputs_digest": digest(*samples),
+                "t_start": float(t[0]), "t_end": float(t[-1]), "samples": len(t), "t_digest": digest(t), "x0": x0,
+                "rtol": self.options["rtol"], "atol": self.options["atol"], "max_steps": self.options["max_steps"],
+                "metrics": [m.name for m in self.metrics], "variables": list(self.variables), "n_runs": self.n_runs,
+                "seed": self.seed, "sampling": self.sampling, "samples_drawn": self.samples,
+                "design_digest": digest(*(self.design[v] for v in self.variables))}
+
     def values(self, run: int) -> dict[str, float]:
         """Variable values of run number ``run``.
 
@@ -231,3 +291,49 @@ def _signal_kind(system, name: str, metric: str) -> str | None:
     known = system.state_names + system.input_names + system.output_names + system.measured_names
     raise InputDataError(f"metric {metric!r} reads {name!r}, which is not a signal of {system.name!r} "
                          f"(signals: {', '.join(known + ['H', 'supplied', 'dissipated'])})")
+
+
+def identity_differences(stored: dict, requested: dict) -> list[str]:
+    """What differs between a stored study identity and a requested one (:meth:`Study.identity`), in words.
+
+    Fields missing from ``stored`` (results written before they were recorded) are not compared;
+    a digest is named only when nothing readable differs.
+
+    Examples
+    --------
+    >>> identity_differences({"params": {"K_b": 0.04}, "rtol": 1e-8}, {"params": {"K_b": 0.08}, "rtol": 1e-6})
+    ['parameter K_b stored 0.04, requested 0.08', 'rtol stored 1e-08, requested 1e-06']
+    """
+    def show(v) -> str:
+        if isinstance(v, float):
+            return f"{v:.12g}"
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(show(x) for x in v) + "]"
+        return "none" if v is None else str(v)
+
+    out = []
+    for key, want in requested.items():
+        if key not in stored:
+            continue
+        have = stored[key]
+        if key == "params" and isinstance(have, dict):
+            for name in dict.fromkeys([*have, *want]):
+                a, b = have.get(name), want.get(name)
+                if a != b:
+                    out.append(f"parameter {name} stored {show(a)}, requested {show(b)}")
+        elif key == "inputs_digest" and have != want and stored.get("inputs") == requested.get("inputs"):
+            out.append(f"inputs (same description, other values on the grid) stored digest {have}, requested {want}")
+        elif key == "t_digest" and have != want and not any(stored.get(k) != requested.get(k)
+                                                            for k in ("t_start", "t_end", "samples")):
+            out.append(f"time grid (same ends and samples, other times) stored digest {have}, requested {want}")
+        elif key == "design_digest" and have != want and not any(stored.get(k) != requested.get(k)
+                                                                 for k in ("variables", "n_runs", "seed", "sampling",
+                                                                          "samples_drawn")):
+            out.append(f"design (same variables and runs, other values: another seed, range or sampling) "
+                       f"stored digest {have}, requested {want}")
+        elif key.endswith("_digest") or key == "inputs":
+            if key == "inputs" and stored.get("inputs_digest", want) != requested.get("inputs_digest"):
+                out.append(f"inputs stored {show(have)}, requested {show(want)}")
+        elif have != want:
+            out.append(f"{key} stored {show(have)}, requested {show(want)}")
+    return out
