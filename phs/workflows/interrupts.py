@@ -106,7 +106,8 @@ def watching() -> Iterator[None]:
         for s, h in old.items():
             if h is not signal.SIG_IGN:
                 signal.signal(s, h if h is not None else signal.SIG_DFL)
-        sys.setprofile(None)
+        if sys.getprofile() is _again:
+            sys.setprofile(None)
         _state.update(depth=0, received=None, deferred=False)
 
 
