@@ -104,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (PHSError, RuntimeError, OSError) as exc:
             if received() is not None:  # a solver's failure caused by the signal: the signal is the news
                 return _interrupted(received())
-            if isinstance(exc, RuntimeError):  # an integrator's failure that reached here unnamed: in words
+            if isinstance(exc, RuntimeError) and not isinstance(exc, PHSError):  # an integrator's failure, unnamed: in words
                 from codegen._solver_errors import failure_code
 
                 if failure_code(exc) is None:
