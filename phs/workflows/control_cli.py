@@ -38,10 +38,18 @@ import os
 import numpy as np
 
 from phs.errors import InputDataError
-from phs.io import write_atomic
-from phs.workflows.cli_options import _check_writable, _finite_or_none, _name_list, _positive, _time_grid
+from phs.workflows.cli_options import (
+    _check_distinct,
+    _check_writable,
+    _finite_or_none,
+    _name_list,
+    _positive,
+    _time_grid,
+    _write_outputs,
+)
 from phs.workflows.cli_vocabulary import _add_model_options, add_deprecated_alias, add_option
 from phs.workflows.inputs import parse_assignments
+from phs.workflows.interrupts import check
 from phs.workflows.loader import load_model
 
 
@@ -117,6 +125,9 @@ def _check_dir(option: str, path: str | None) -> None:
     parent = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(parent):
         raise InputDataError(f"{option} {path!r}: directory {parent!r} does not exist")
+    writable = path if os.path.isdir(path) else parent
+    if not os.access(writable, os.W_OK | os.X_OK):
+        raise InputDataError(f"{option} {path!r}: directory {writable!r} is not writable")
 
 
 def run_control(args: argparse.Namespace) -> int:
@@ -207,17 +218,28 @@ def run_control(args: argparse.Namespace) -> int:
                 "reached": {tg.name: tg.name not in unreached for tg in ctrl.targets},
                 "max_increase_H": res.max_increase("H_cl"), "inputs": res.info["input_ranges"]}
         document = json.dumps(_finite_or_none(document), indent=1, allow_nan=False) + "\n"
-    print(text)
-    if args.report is not None:
-        os.makedirs(args.report, exist_ok=True)
-        for name, data in files.items():
-            write_atomic(os.path.join(args.report, name), data)
-    if sources is not None:
-        os.makedirs(args.export_c, exist_ok=True)
-        for name, data in sources.items():
-            write_atomic(os.path.join(args.export_c, name), data)
+    outputs = {}  # every file of --report, --export-c and --json: all written, or none
+    named = [("--json", args.json)] if document is not None else []
+    for option, folder, contents in (("--report", args.report, files), ("--export-c", args.export_c, sources)):
+        if folder is not None and contents is not None:
+            for name, data in contents.items():
+                outputs[os.path.join(folder, name)] = data
+                named.append((option, os.path.join(folder, name)))
     if document is not None:
-        write_atomic(args.json, document)
+        outputs[args.json] = document
+    _check_distinct(*named)
+    check()  # an interrupt an integrator swallowed stops the command before anything is written
+    print(text)
+    created = [d for d in (args.report, args.export_c) if d is not None and not os.path.isdir(d)]
+    try:
+        for d in created:
+            os.makedirs(d)
+        _write_outputs(outputs)
+    except BaseException:
+        for d in created:
+            if os.path.isdir(d) and not os.listdir(d):
+                os.rmdir(d)  # all or nothing: not even the directories
+        raise
     return 0 if report.passed and not unreached else 1
 
 

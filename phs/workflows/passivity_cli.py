@@ -187,6 +187,9 @@ def run_passivity(args: argparse.Namespace) -> int:
         doc = report.to_dict()
         doc.update({"command": "passivity", "model": args.model, "phs_version": phs.__version__})
         document = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    from phs.workflows.interrupts import check
+
+    check()  # an interrupt an integrator swallowed stops the command before anything is written
     print(text)
     if args.report is not None:
         report.write_report(args.report)
