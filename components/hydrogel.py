@@ -121,7 +121,7 @@ class HydrogelActuator(Component):
         p = self._state("p", None, "kg*m/s", (-10.0, 10.0), "momentum of the drive", "I", "translational", 1e-2)
         port = self._port("c", "rotational")
         drive = self._port("drive", "electrical", supplies=True)
-        info = InputInfo(self.input, "V", f"{self.input}.y", "N*m/s", "effort", "heater voltage", (0.0, 3.7))
+        info = InputInfo(self.input, "V", f"{self.input}.y", "N*m/(s*V)", "effort", "heater voltage", (0.0, 3.7))
         v = p.coenergy
         relations = (
             Relation(e.rate - v + sym["r"] * port.flow, self.name, "kinematic"),

@@ -18,6 +18,7 @@ from phs._budget import MAX_TERMS, affordable, expanded_terms, is_zero, mp_value
 from phs._sparse import nonzero_entries
 from phs.errors import UnitError
 from phs.storage_bound import bounded_below
+from phs.structure_units import structure_unit_problems
 from phs.units import DIMENSIONLESS, JOULE, dimension, format_dim, parse_unit
 
 
@@ -328,13 +329,17 @@ def check_system(system, samples: int = 200, seed: int = 0) -> CheckReport:
     bound = bounded_below(system, samples=samples, seed=seed)
     items.append(CheckItem("H bounded below", bound.verdict, bound.method, bound.detail, bound.point))
 
-    # units
+    # units: the energy terms, then every entry of the structure, the ports and the measured outputs
     try:
         problems = unit_problems(system)
+        structural, skipped = structure_unit_problems(system)
+        problems += structural
     except UnitError as exc:
-        problems = [str(exc)]
+        problems, skipped = [str(exc)], 0
+    note = f" ({skipped} entries resting on constants without a declared unit skipped)" if skipped else ""
     items.append(CheckItem("units", "fail" if problems else "pass", "dimensional analysis",
-                           "; ".join(problems) if problems else "every energy term is in joules"))
+                           "; ".join(problems) if problems else "every energy term is in joules; J, R, G, P, S, N, "
+                           f"the ports and the measured outputs agree with the states' and ports' units{note}"))
 
     # validity domain coverage
     if system.conditions:

@@ -215,53 +215,71 @@ class _Mismatch(Exception):
     pass
 
 
-def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim]) -> Dim:
+def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = False) -> Dim | None:
     """Dimension of ``expr`` given the dimension of each symbol.
 
     Raises ``UnitError`` naming the offending sub-expression when a sum mixes
     dimensions or a transcendental function receives a dimensioned argument.
+
+    With ``free_floats``, a floating-point number (``35.15``, not ``2`` or ``1/2``) is a constant whose
+    unit was not declared: it takes whatever dimension its place requires, and an expression whose
+    dimension rests on one comes out as None (undecided) rather than dimensionless.
 
     Examples
     --------
     >>> k, x = sp.symbols("k x")
     >>> format_dim(dimension(k * x**2 / 2, {k: parse_unit("N/m"), x: parse_unit("m")}))
     'kg*m**2/s**2'
+    >>> m = parse_unit("m")
+    >>> dimension(x + 2.5 * k, {x: m, k: m}, free_floats=True) == m, dimension(2.5 * x, {x: m}, free_floats=True)
+    (True, None)
     """
-    cache: dict[sp.Expr, Dim] = {}
+    cache: dict[sp.Expr, Dim | None] = {}
 
-    def rec(e: sp.Expr) -> Dim:
+    def same(dims, e, what):
+        known = [x for x in dims if x is not None]
+        if any(x != known[0] for x in known):
+            raise UnitError(what)
+        return known[0] if known else None
+
+    def plain(a, e) -> None:
+        if rec(a) not in (DIMENSIONLESS, None):
+            raise UnitError(f"argument of {e.func.__name__} is not dimensionless in {e}")
+
+    def rec(e: sp.Expr) -> Dim | None:
         if e in cache:
             return cache[e]
         if e.is_Number or e.is_NumberSymbol:
-            d = DIMENSIONLESS
+            d = None if free_floats and e.is_Float else DIMENSIONLESS
         elif e.is_Symbol:
             if e not in units:
                 raise UnitError(f"no unit known for symbol {e}")
             d = units[e]
         elif e.is_Add:
             dims = [rec(a) for a in e.args]
-            d = dims[0]
-            for a, da in zip(e.args[1:], dims[1:]):
-                if da != d:
+            known = [(a, x) for a, x in zip(e.args, dims) if x is not None]
+            for a, da in known[1:]:
+                if da != known[0][1]:
                     raise UnitError(
-                        f"sum mixes dimensions: {e.args[0]} is {format_dim(d)} but {a} is {format_dim(da)}"
+                        f"sum mixes dimensions: {known[0][0]} is {format_dim(known[0][1])} but {a} is {format_dim(da)}"
                     )
+            d = known[0][1] if known else None
         elif e.is_Mul:
+            dims = [rec(a) for a in e.args]
             d = DIMENSIONLESS
-            for a in e.args:
-                d = _mul(d, rec(a))
+            for x in dims:
+                d = None if d is None or x is None else _mul(d, x)
         elif e.is_Pow:
             db = rec(e.base)
             if e.exp.is_Rational:
-                d = _pow(db, Fraction(str(e.exp)))
+                d = None if db is None else _pow(db, Fraction(str(e.exp)))
             else:
-                if rec(e.exp) != DIMENSIONLESS or db != DIMENSIONLESS:
+                if rec(e.exp) not in (DIMENSIONLESS, None) or db not in (DIMENSIONLESS, None):
                     raise UnitError(f"non-integer power of a dimensioned quantity: {e}")
                 d = DIMENSIONLESS
         elif isinstance(e, _TRANSCENDENTAL):
             for a in e.args:
-                if rec(a) != DIMENSIONLESS:
-                    raise UnitError(f"argument of {e.func.__name__} is not dimensionless in {e}")
+                plain(a, e)
             d = DIMENSIONLESS
         elif isinstance(e, (sp.Abs, sp.re, sp.im)):
             d = rec(e.args[0])
@@ -269,21 +287,15 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim]) -> Dim:
             rec(e.args[0])
             d = DIMENSIONLESS
         elif isinstance(e, (sp.Max, sp.Min)):
-            dims = [rec(a) for a in e.args]
-            if any(x != dims[0] for x in dims):
-                raise UnitError(f"{e.func.__name__} mixes dimensions in {e}")
-            d = dims[0]
+            d = same([rec(a) for a in e.args], e, f"{e.func.__name__} mixes dimensions in {e}")
         elif isinstance(e, sp.atan2):
-            if rec(e.args[0]) != rec(e.args[1]):
-                raise UnitError(f"atan2 arguments differ in dimension in {e}")
+            same([rec(a) for a in e.args], e, f"atan2 arguments differ in dimension in {e}")
             d = DIMENSIONLESS
         elif isinstance(e, sp.Piecewise):
-            dims = [rec(c[0]) for c in e.args]
-            if any(x != dims[0] for x in dims):
-                raise UnitError(f"branches of a piecewise expression differ in dimension in {e}")
-            d = dims[0]
+            d = same([rec(c[0]) for c in e.args], e, f"branches of a piecewise expression differ in dimension in {e}")
         elif hasattr(e, "_dimension"):  # custom functions declare how they combine their arguments' dimensions
-            d = e._dimension([rec(a) for a in e.args])
+            dims = [rec(a) for a in e.args]
+            d = None if None in dims else e._dimension(dims)
         else:
             raise UnitError(f"cannot determine the dimension of {e}")
         cache[e] = d

@@ -13,6 +13,7 @@ from codegen.passivity.report import PassivityReport
 from codegen.passivity.storage import _storage
 from codegen.passivity.structural import _dissipation, _interconnection, _sign_violations, _symbolic_dissipation
 from phs.errors import InputDataError
+from phs.structure_units import structure_unit_problems
 
 
 def certify(system, *, box: dict | None = None, params: dict | None = None, equilibrium=None, u=None, x0=None,
@@ -20,7 +21,8 @@ def certify(system, *, box: dict | None = None, params: dict | None = None, equi
     """Certify that ``system`` is passive over a box of states (and parameters), and say where it is not.
 
     Runs the tests of :mod:`codegen.passivity`: ``interconnection``, ``dissipation`` (the margin),
-    ``feedthrough``, ``storage``, and, when asked, ``trajectory`` and ``local``.
+    ``feedthrough``, ``storage``, and, when asked, ``trajectory`` and ``local``; a failed ``units`` test is added
+    when the dimensions of the structure disagree (see :mod:`phs.structure_units`).
 
     Parameters
     ----------
@@ -93,6 +95,10 @@ def certify(system, *, box: dict | None = None, params: dict | None = None, equi
         traj = _trajectory(system, trajectory, params)
     V, info = _sample(model, b, samples, seed)
     tests = [_interconnection(system, checks)]
+    wrong_units = structure_unit_problems(system)[0]  # a structure whose units disagree is no physical power balance
+    if wrong_units:
+        tests.append(PassivityTest("units", "fail", "dimensional analysis of J, R, G, P, S, N and the outputs",
+                                   "; ".join(wrong_units)))
     if len(V) == 0:
         why = "no point of the box satisfies the validity conditions " + "; ".join(info.get("empty", []))
         tests += [PassivityTest(n, "undecided", "sampled", why) for n in ("dissipation", "feedthrough", "storage")]

@@ -198,6 +198,18 @@ def test_dissipation_over_the_symbolic_budget_finishes_and_is_not_a_pass():
     assert "not finite" in diss.summary and "over the symbolic budget" in diss.summary
 
 
+def test_damper_declared_in_newtons_is_not_certified(msd):
+    """The certificate used to say PASSIVE for a damper whose coefficient is declared in N: the structure's
+    units disagree (R[0,0] is a force where kg/s is needed), so it is no physical power balance."""
+    from dataclasses import replace
+
+    bad = msd._replace(params=[replace(q, unit="N") if q.name == "b.b" else q for q in msd.params])
+    report = certify(bad, samples=32, starts=1)
+    assert not report.passive and report["units"].verdict == "fail"
+    assert "R[0,0] (element 'b') is kg*m/s**2 (N), expected kg/s" in report["units"].summary
+    assert [t.name for t in certify(msd, samples=32, starts=1).tests if t.name == "units"] == []
+
+
 def test_coupled_R_is_indefinite_only_off_its_diagonal():
     """R = [[a, c x], [c x, a]] has PSD diagonal everywhere but a negative eigenvalue a - |c x| for |x| > a / c."""
     system = coupled_losses()

@@ -62,6 +62,7 @@ from components import (
 )
 from phs import Component, Param, bond, interconnect, parallel, series, symbol_of_state
 from phs.checks import unit_problems
+from phs.structure_units import structure_unit_problems
 
 # Power balance: rounding of the products and sums is bounded by a few ulps of the sum of the
 # absolute values of the summands (|dH/dt|, |y^T u|, |dissipated| and the terms dH_i * x'_i of
@@ -183,7 +184,7 @@ def _transformer():
 def _gyrator():
     """DC motor: electrical loop and rotor joined by a gyrator (torque constant)."""
     return _spec("motor", [VoltageSource("U"), Resistor("R", R=2.0), Inductor("L", L=1e-3),
-                                  Gyrator("kt", 0.05), RotationalInertia("J", I=1e-5), RotationalDamper("b", b=1e-5)],
+                                  Gyrator("kt", 0.05, "N*m/A"), RotationalInertia("J", I=1e-5), RotationalDamper("b", b=1e-5)],
                         [series("U", "R", "L", "kt.a"), series("kt.b", "J", "b")])
 
 
@@ -410,3 +411,9 @@ def test_energy_terms_are_in_joules(builder):
     """Each component declares units that make its stored energy come out in joules."""
     s = model(builder)["system"]
     assert unit_problems(s) == []
+
+
+@pytest.mark.parametrize("builder", MODELS, ids=lambda f: f.__name__.strip("_"))
+def test_structure_units_agree(builder):
+    """Each component's J, R, G, P, S, N, ports and measured outputs agree with its states' and ports' units."""
+    assert structure_unit_problems(model(builder)["system"])[0] == []
