@@ -317,8 +317,9 @@ class _Table:
 def _fast_rows(path: str):
     """Header and :class:`_Table` of a CSV file whose data rows are all numbers, finite, of the header's width
     and without blank lines between them, read by numpy's C parser (10⁶ rows of 3 columns, 33 MB, read into
-    columns in 0.8 s and 49 MB of peak memory where the cell-by-cell reading takes 7.8 s and 399 MB); None for any other file (or one that cannot be
-    read), which :func:`_read_rows` then reads cell by cell and names its row and column in errors."""
+    columns in 0.8 s and 49 MB of peak memory where the cell-by-cell reading takes 7.8 s and 399 MB); None for
+    any other file (or one that cannot be read), which :func:`_read_rows` then reads cell by cell and names its
+    row and column in errors."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
