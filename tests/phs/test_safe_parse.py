@@ -27,7 +27,9 @@ from phs.workflows.cli_recordings import parse_scales
 from phs.workflows.inputs import input_signals
 from systems.examples import rc_circuit
 
-BOUND = 5.0  # seconds: every refusal is immediate (well under 0.1 s idle); 1 s was exceeded (1.09 s) refusing a 1.2 MB --scale at a load average of 4.5 on 2 cores, while a hang runs for minutes
+# seconds: every refusal is immediate (well under 0.1 s idle); 1 s was exceeded (1.09 s) refusing a 1.2 MB
+# --scale at a load average of 4.5 on 2 cores, while a hang runs for minutes
+BOUND = 5.0
 RC = "systems.examples:rc_circuit"
 
 RUN = "__import__('os').system('touch {m}')"
