@@ -23,7 +23,8 @@ set beyond the sizes, and the cell-by-cell CSV reading, ``phs.workflows.inputs._
 
 The last line is one JSON object: ``sizes``, ``simulate_seconds`` and ``identify_seconds`` by size,
 ``identify_iterations``, ``simulate_growth``, ``identify_growth`` (and ``identify_growth_per_iteration``: the
-number of iterations depends on the data), ``peak_mb`` by size (the larger of the two children),
+number of iterations depends on the data; ``growth_from_1e5``: the slopes over the sizes from 10⁵ on, where a
+run's fixed costs weigh least), ``peak_mb`` by size (the larger of the two children),
 ``baseline_simulate_seconds`` and ``baseline_growth``, ``fitted`` (k.K and b.b at the largest size),
 ``identify_1e6_under_30s``, ``growth_goal_met``.
 """
@@ -142,10 +143,16 @@ def main(argv=None) -> None:
     g_sim = growth(ns, [sim[n] for n in ns])
     g_ide = growth(ns, [ide[n] for n in ns]) if ide else None
     g_per = growth(ns, [ide[n] / its[n] for n in ns]) if ide else None
+    top = [n for n in ns if n >= 100_000]  # the fixed costs of a run weigh least there
+    g_top = {"simulate": round(growth(top, [sim[n] for n in top]), 3)} if len(top) > 1 else {}
+    if ide and len(top) > 1:
+        g_top["identify"] = round(growth(top, [ide[n] for n in top]), 3)
     g_base = growth(sorted(base), [base[n] for n in sorted(base)]) if len(base) > 1 else None
     print(f"growth exponent: simulate {g_sim:.2f}" + (f", identify {g_ide:.2f}" if g_ide is not None else "")
           + (f", previous path (simulate, up to {max(base)}) {g_base:.2f}" if g_base is not None else "")
           + "  (goal: at most 1.1)")
+    if g_top:
+        print("growth exponent from 10^5 on: " + ", ".join(f"{k} {v:.2f}" for k, v in g_top.items()))
     big = ide.get(1_000_000)
     if big is not None:
         print(f"identify 10^6 samples: {big:.1f} s (goal: under 30 s)")
@@ -155,7 +162,7 @@ def main(argv=None) -> None:
         "identify_seconds": {str(n): round(ide[n], 3) for n in sorted(ide)},
         "identify_iterations": {str(n): its[n] for n in sorted(its)},
         "simulate_growth": round(g_sim, 3), "identify_growth": None if g_ide is None else round(g_ide, 3),
-        "identify_growth_per_iteration": None if g_per is None else round(g_per, 3),
+        "identify_growth_per_iteration": None if g_per is None else round(g_per, 3), "growth_from_1e5": g_top,
         "peak_mb": {str(n): round(peak[n], 1) for n in ns},
         "baseline_simulate_seconds": {str(n): round(base[n], 3) for n in sorted(base)},
         "baseline_growth": None if g_base is None else round(g_base, 3),
