@@ -49,9 +49,16 @@ def expanded_terms(expr) -> int:
     >>> expanded_terms((x + y) * (x - y)), expanded_terms((x + y) ** 3)
     (4, 4)
     """
+    return _prices(expr)[0]
+
+
+def _prices(expr) -> tuple[int, int]:
+    """(price of ``expr``, largest price of an argument of a function or condition inside it)."""
     cache: dict = {}
+    inner = 0
 
     def rec(e) -> int:
+        nonlocal inner
         if e in cache:
             return cache[e]
         if e.is_Atom:
@@ -65,23 +72,21 @@ def expanded_terms(expr) -> int:
         elif e.is_Pow and e.exp.is_Integer and e.exp > 1:
             k, m = rec(e.base), int(e.exp)
             n = 1 if k == 1 else (_CAP if m > 10**4 else min(_CAP, comb(k + m - 1, m)))
-        else:  # a function, a negative or fractional power: one term (its arguments priced separately)
+        else:  # a function, a negative or fractional power, a condition: one term, its arguments priced apart
             n = 1
             for a in e.args:
-                rec(a)
+                if isinstance(a, sp.Basic):
+                    price = rec(a)  # (rec may raise ``inner`` itself: read it after the call)
+                    inner = max(inner, price)
         cache[e] = min(n, _CAP)
         return cache[e]
 
-    return rec(sp.sympify(expr, strict=True))
+    return rec(sp.sympify(expr, strict=True)), inner
 
 
 def _worst_inner(expr) -> int:
     """Largest expansion price of ``expr`` or of any argument of a function inside it."""
-    worst = expanded_terms(expr)
-    for node in sp.preorder_traversal(expr):
-        if isinstance(node, sp.Function):
-            worst = max(worst, *(expanded_terms(a) for a in node.args))
-    return worst
+    return max(_prices(expr))
 
 
 def affordable(expr, max_terms: int = MAX_TERMS, max_ops: int = MAX_OPS) -> bool:

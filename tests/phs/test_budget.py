@@ -57,3 +57,10 @@ def test_mpmath_evaluates_what_overflows():
 def test_undefined_stays_nan():
     v = mp_values([sp.Piecewise((a, a > 0), (sp.nan, True))], [a], [-1.0])[0]
     assert v != v
+
+
+def test_expressions_inside_functions_and_conditions_are_priced():
+    """A large power hidden in a Piecewise branch or under Abs is priced like one outside (501 terms > 400)."""
+    big = (a + 2) ** 500
+    assert not affordable(sp.Piecewise((big, a > 0), (1, True))) and not affordable(sp.Abs(big - a))
+    assert affordable(sp.Piecewise(((a + 2) ** 3, a > 0), (1, True)))

@@ -109,3 +109,15 @@ def test_energy_over_budget_is_minimised_over_the_box_and_said():
     item = osc.check()["H bounded below"]
     assert time.perf_counter() - t < 20.0
     assert item.verdict == "pass" and "symbolic decision refused" in item.method
+
+
+def test_skew_symmetry_undefined_at_every_sample_is_undecided_not_pass():
+    """J[0,1] over the budget and undefined (NaN) wherever sampled: its skew symmetry is not decided, and check()
+    says so instead of passing it."""
+    q, p = sp.Symbol("q", real=True), sp.Symbol("p", real=True)
+    big = sp.Piecewise(((q**2 + 5 * q + 6) ** 100, q > 5), (sp.nan, True))
+    osc = PHSystem("osc", [StateInfo("q", range=(-1, 1)), StateInfo("p", kind="I")], H=q**2 / 2 + p**2 / 2,
+                   J=[[0, big], [-sp.Piecewise((((q + 2) * (q + 3)) ** 100, q > 5), (sp.nan, True)), 0]],
+                   R=[[0, 0], [0, 0]])
+    item = osc.check()["J skew-symmetric"]
+    assert item.verdict == "undecided" and "undefined at all 8 sampled points" in item.detail
