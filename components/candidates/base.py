@@ -125,8 +125,9 @@ def _body_forces(system, xs, us, grads, rate) -> dict:
         return {}
     rows = [system.state_names.index(b) for b in bodies]
     J, G = system.J, system.G
-    jg = system.lambdify(sp.Matrix([J[i, :] for i in rows]), with_u=False)
-    gg = system.lambdify(sp.Matrix([G[i, :] for i in rows]), with_u=False) if G.shape[1] else None
+    # plain names: sympy renames dotted names one argument at a time, quadratic in a large model's size
+    jg = system._lambdify(sp.Matrix([J[i, :] for i in rows]), False, plain_names=True)
+    gg = system._lambdify(sp.Matrix([G[i, :] for i in rows]), False, plain_names=True) if G.shape[1] else None
     f = np.zeros((len(xs), len(rows)))
     for n, (x, gr) in enumerate(zip(xs, grads)):
         f[n] = np.asarray(jg(x), float).reshape(len(rows), -1) @ gr
