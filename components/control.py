@@ -92,8 +92,9 @@ class PositionLoop(Component):
         the control law and recorded with it): the body feels ``F_c + feedforward_gain · u_ff`` and the
         measured ``effort`` is that sum.  Its conjugate output ``{feedforward}.v`` is
         ``feedforward_gain`` times the body's velocity.
-    feedforward_gain : float
-        Force per unit of the feedforward input [N per its unit] (default 1: the input is a force).
+    feedforward_gain : float or Param
+        Force per unit of the feedforward input [N per its unit], the parameter ``{name}.k_ff`` (default 1:
+        the input is a force).
     feedforward_unit : str
         Unit of the feedforward input (default ``"N"``).
 
@@ -116,7 +117,7 @@ class PositionLoop(Component):
         super().__init__(name)
         if feedforward is not None:
             require_positive(name, "feedforward_gain", feedforward_gain)
-        self.feedforward, self.ff_gain, self.ff_unit = feedforward, float(feedforward_gain), feedforward_unit
+        self.feedforward, self.ff_gain, self.ff_unit = feedforward, feedforward_gain, feedforward_unit
         require_positive(name, "K_p", K_p)
         _nonnegative(name, "K_d", K_d)
         if tau is not None:
@@ -151,10 +152,12 @@ class PositionLoop(Component):
         r = info.symbol
         ff, ff_force = None, 0  # a signal added after the control law (feedforward), a force on the body
         if self.feedforward is not None:
+            kff, d4 = self._param("k_ff", self.ff_gain, f"N/({self.ff_unit})", "force per unit of the signal added to the output")
+            params += d4
             ff = self._port("ff", "any", supplies=True)
             internal.append(ff)
-            ff_force = self.ff_gain * ff.effort
-            rels.append(Relation(ff.flow - self.ff_gain * port.flow, self.name, "feedforward"))
+            ff_force = kff * ff.effort
+            rels.append(Relation(ff.flow - kff * port.flow, self.name, "feedforward"))
         if not filtered:
             rels += [Relation(port.effort - (spring_force + kd * port.flow - kp * ref.effort - ff_force), self.name, "controller"),
                      Relation(ref.flow - kp * port.flow, self.name, "controller")]
@@ -177,10 +180,10 @@ class PositionLoop(Component):
             force = kp * (rf - x) + kd * (r - rf) / tau - (tau * y - kf * rf)
         sources = [Source(info, ref)]
         if ff is not None:  # recorded with the command: the measured effort is the sum
-            ff_info = InputInfo(self.feedforward, self.ff_unit, f"{self.feedforward}.v", f"N*m/s/({self.ff_unit})", "effort",
+            ff_info = InputInfo(self.feedforward, self.ff_unit, f"{self.feedforward}.v", f"N*m/(s*{self.ff_unit})", "effort",
                                 f"signal added to the output of the position controller {self.name}")
             sources.append(Source(ff_info, ff))
-            force = force + self.ff_gain * ff_info.symbol
+            force = force + kff * ff_info.symbol
         meas = Measured(self.effort, force, "N", f"force computed by the position controller {self.name}", command=True)
         return Piece(self.name, storages=tuple(storages), energy=tuple(energy), ports=(port,), internal=tuple(internal),
                      relations=tuple(rels), sources=tuple(sources), dissipators=(diss,), params=params,
