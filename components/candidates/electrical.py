@@ -218,7 +218,9 @@ class SeriesResistance(Candidate):
             if system.G[k, j] != 0 or system.P[k, j] != 0:
                 out_rms = max(out_rms, scales.get("rate", system.state_names[k], 0.0))
         r_ref = scales.get("level", where, 1.0) / (out_rms or 1.0)
-        Ra = self.param("R_a", 0.02 * r_ref, "Ohm", f"series resistance at input {where}", _log_range(r_ref, 1e-5, 100.0))
+        info = system.inputs[j]  # effort over its conjugate flow: Ohm for a voltage, N*s/m for a force
+        unit = "Ohm" if (info.unit, info.output_unit) == ("V", "A") else f"({info.unit})/({info.output_unit})"
+        Ra = self.param("R_a", 0.02 * r_ref, unit, f"series resistance at input {where}", _log_range(r_ref, 1e-5, 100.0))
         s = _series_resistor_at_input(system, j, Ra.symbol, [Ra], self.effect)
         return Augmentation(self.effect, where, "resistor R_a in series with the input", s, [Ra.name], {Ra.name: Ra.range}, [Ra.name],
                             neutral={Ra.name: _zero(Ra)})
