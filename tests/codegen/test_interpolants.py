@@ -50,15 +50,16 @@ def test_a_long_input_enters_through_the_banded_spline_held_at_its_ends():
 
 
 def test_building_the_banded_spline_is_linear():
-    # four times the samples, four times the work: a ratio below 6 leaves room for a loaded machine (CasADi's
-    # own build took 4.9 times longer for twice the samples at 10^5: 2.2 s against 11 s at 2*10^5)
+    # four times the samples, four times the work; quadratic growth would be 16 (CasADi's own build took 4.9
+    # times longer for twice the samples at 10^5: 2.2 s against 11 s at 2*10^5).  The build's own CPU time,
+    # best of three: wall time failed the bound of 6 once under a load of 4 on 2 cores; 8 keeps room for it
     def seconds(n):
         t, v = _smooth(n, False)
         best = np.inf
         for _ in range(3):
-            w = time.perf_counter()
+            w = time.process_time()
             banded_bspline("u", t, v)
-            best = min(best, time.perf_counter() - w)
+            best = min(best, time.process_time() - w)
         return best
 
-    assert seconds(400_000) / seconds(100_000) < 6.0
+    assert seconds(400_000) / seconds(100_000) < 8.0

