@@ -28,8 +28,17 @@ SWEEP = ["sweep", "systems.examples:rc_circuit", "--t-end", "2", "--dt", "1e-3",
 TIMEOUT = 120  # generous: two cores shared with other work; the commands stop well within a second or two
 
 
+def _default_signals() -> None:
+    """In the child: SIGINT and SIGTERM at their defaults.  A test runner started in the background by a
+    non-interactive shell ignores SIGINT, its children inherit that, and a command keeps an ignored signal
+    ignored (as a shell's background job expects)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _start(args, cwd):
-    return subprocess.Popen(PHS + args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(PHS + args, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_signals)
 
 
 def _stop(proc, sig) -> tuple[int, str, float]:
