@@ -4,7 +4,8 @@ M = 95.1 kg, Fv = 203.5 N s/m, Coulomb friction Fc = 20.4 N and a force offset o
 has mass and viscous friction only (:func:`systems.lab.emps_stage`, and the same model written by hand).
 
 The default suite reads the recordings every 5th sample (200 Hz: the loop's poles are below 20 Hz) and offers
-a few candidates; the full recordings with the whole library run under ``-m slow``.
+a few candidates to the model built from components (22 s); the same for the model written by hand (28 s) and
+the full recordings with the whole library for both run under ``-m slow``.
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ def _near_published(d, tol_m=0.1, tol_fv=0.15, tol_fc=0.2):
     assert abs(v["coulomb_friction.F_c"] / PUBLISHED["Fc"] - 1) < tol_fc, v
 
 
-@pytest.mark.parametrize("form", [emps_stage, emps_stage_matrices], ids=["components", "by_hand"])
+@pytest.mark.parametrize("form", [emps_stage, pytest.param(emps_stage_matrices, marks=pytest.mark.slow)],
+                         ids=["components", "by_hand"])
 def test_friction_named_on_the_servo_in_its_loop(form):
     """Both forms of the model name the Coulomb friction, refit the mass and viscous friction near the
     published values (10 %, 15 %; the friction within 20 %: a smooth friction against a sign function) and
