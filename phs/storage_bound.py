@@ -230,7 +230,7 @@ def bounded_below(system, samples: int = 200, seed: int = 0) -> Bound:
     ('fail', -1.0)
     """
     states = list(system.x)
-    refused = [t.label for t in system.energy_terms if not sp.sympify(t.expr).is_nonnegative and not affordable(t.expr)]
+    refused = [t.label for t in system.energy_terms if not sp.sympify(t.expr, strict=True).is_nonnegative and not affordable(t.expr)]
     if all(_provably_bounded(t.expr, states) for t in system.energy_terms):
         return Bound("pass", "symbolic", "every energy term is nonnegative or an even polynomial with a positive "
                      "leading coefficient: H is bounded below everywhere")

@@ -156,7 +156,7 @@ def structure_unit_problems(system) -> tuple[list[str], int]:
     free_symbols = ({system.states[i].symbol for i in free_x} | {system.inputs[k].symbol for k in free_u}
                     | {sp.Symbol(system.inputs[k].output, real=True) for k in free_y})
     for mo in system.measured:
-        expr = sp.sympify(mo.expr)
+        expr = sp.sympify(mo.expr, strict=True)
         check(expr, parse_unit(mo.unit, f"measured output {mo.name!r}"), f"measured output {mo.name!r}",
               _undeclared(mo.unit) or expr.free_symbols & free_symbols)
     return problems, skipped
