@@ -10,6 +10,7 @@ import casadi as ca
 import numpy as np
 
 from codegen.functions import generate
+from phs._results import ResultMixin, finish, panels
 from phs.errors import InputDataError
 from phs.io import write_atomic
 
@@ -48,7 +49,7 @@ def _mapped(f, n: int):
     return fm
 
 
-class SimulationResult:
+class SimulationResult(ResultMixin):
     """Trajectory of a system on a time grid, indexed by signal name.
 
     ``res["seg2.theta"]`` gives a state, input, port output (``"U.i"``),
@@ -57,7 +58,7 @@ class SimulationResult:
     ``"dHdt"`` [W].  Energies over time are ``E_supplied`` and ``E_dissipated``
     [J] (:attr:`quadratures` of a CVODES run, or :meth:`energy_accounts`).
     :meth:`unit` gives each signal's unit; :meth:`to_csv` writes headers
-    ``name [unit]``.
+    ``name [unit]``; :meth:`plot` draws the run, :meth:`to_pandas` gives a DataFrame.
 
     Parameters
     ----------
@@ -267,7 +268,7 @@ class SimulationResult:
     def to_pandas(self) -> pd.DataFrame:
         """Every signal as a pandas DataFrame indexed by time ``t``; units in ``df.attrs["units"]``.
 
-        Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
 
         Examples
         --------
@@ -287,12 +288,22 @@ class SimulationResult:
         df.attrs["units"] = {name: self.unit(name) for name in header}
         return df
 
-    def plot(self, path=None, fig=None) -> Figure:
+    def plot(self, path=None, fig=None, *, ax=None) -> Figure:
         """States (each divided by its typical size), measured outputs (a panel per unit) and the
         energy accounts (H - H(0), supplied and dissipated energy, and the balance residual).
 
-        Returns the matplotlib figure (drawn on ``fig`` when given), saved to ``path`` when given
-        (atomically, in the format of its suffix).
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).
+        fig : matplotlib Figure, optional
+            Draw the panels on this figure.
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these axes instead, one per panel (1 + number of measured units + 1).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
 
         Examples
         --------
@@ -303,45 +314,52 @@ class SimulationResult:
         >>> [ax.get_ylabel() for ax in fig.axes]
         ['state / scale [1]', 'measured [m]', 'energy [J]']
         """
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
         s = self.system
         measured_units = list(dict.fromkeys(mo.unit for mo in s.measured))   # one panel per unit
-        panels = ["states"] + measured_units + ["energy"]
-        if fig is None:
-            fig = Figure(figsize=(8, 2.6 * len(panels)), constrained_layout=True)
-            FigureCanvasAgg(fig)
-        axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
-        for ax, panel in zip(axes, panels, strict=True):
+        kinds = ["states"] + measured_units + ["energy"]
+        if fig is not None and ax is None:
+            axes = fig.subplots(len(kinds), 1, sharex=True, squeeze=False)[:, 0]
+        else:
+            fig, grid = panels(ax, len(kinds), figsize=(8, 2.6 * len(kinds)), sharex=True, what="SimulationResult.plot")
+            axes = grid[:, 0]
+        for ax_, panel in zip(axes, kinds, strict=True):
             if panel == "states":
                 for st in s.states:
-                    ax.plot(self.t, self[st.name] / st.typical, label=f"{st.name} / {st.typical:g} {st.unit}")
-                ax.set_ylabel("state / scale [1]")
+                    ax_.plot(self.t, self[st.name] / st.typical, label=f"{st.name} / {st.typical:g} {st.unit}")
+                ax_.set_ylabel("state / scale [1]")
             elif panel != "energy":
                 for mo in s.measured:
                     if mo.unit == panel:
-                        ax.plot(self.t, self[mo.name], label=mo.name)
-                ax.set_ylabel(f"measured [{panel}]")
+                        ax_.plot(self.t, self[mo.name], label=mo.name)
+                ax_.set_ylabel(f"measured [{panel}]")
             else:
                 E_supplied, E_dissipated = self.energy_accounts()
-                ax.plot(self.t, self.H - self.H[0], label="H - H(0)")
-                ax.plot(self.t, E_supplied, label="E_supplied (∫ supplied power dt)")
-                ax.plot(self.t, E_dissipated, label="E_dissipated (∫ dissipated power dt)")
-                ax.plot(self.t, self.H - self.H[0] - E_supplied + E_dissipated, "k:", label="balance residual")
-                ax.set_ylabel("energy [J]")
-            ax.legend(loc="best", fontsize="small")
-            ax.grid(True, alpha=0.3)
+                ax_.plot(self.t, self.H - self.H[0], label="H - H(0)")
+                ax_.plot(self.t, E_supplied, label="E_supplied (∫ supplied power dt)")
+                ax_.plot(self.t, E_dissipated, label="E_dissipated (∫ dissipated power dt)")
+                ax_.plot(self.t, self.H - self.H[0] - E_supplied + E_dissipated, "k:", label="balance residual")
+                ax_.set_ylabel("energy [J]")
+            ax_.legend(loc="best", fontsize="small")
+            ax_.grid(True, alpha=0.3)
         axes[-1].set_xlabel("t [s]")
         fig.suptitle(f"{s.name}: simulation")
-        if path is not None:
-            from codegen.figures import save_figure
+        return finish(fig, path, dpi=110)
 
-            save_figure(fig, path, dpi=110)
-        return fig
+    def _headline(self) -> str:
+        return f"{self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g}"
 
-    def __repr__(self) -> str:
-        return f"SimulationResult({self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g})"
+    def _table(self) -> tuple[list, list]:
+        """Each state, input and measured output with its unit, first, last, smallest and largest value."""
+        s = self.system
+        shown = (s.state_names + s.input_names + s.measured_names)[:20]
+        rows = []
+        for name in shown:
+            v = self[name]
+            rows.append((name, self.unit(name), v[0], v[-1], np.min(v), np.max(v)))
+        rest = len(s.state_names + s.input_names + s.measured_names) - len(shown)
+        if rest:
+            rows.append((f"... {rest} more signals", "", "", "", "", ""))
+        return ["signal", "unit", "first", "last", "min", "max"], rows
 
 
 def signal(system, name: str, *, x, u, y=None, measured=None, extra=None, known=(), where: str = "") -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 import sympy as sp
 
 from phs._budget import MAX_TERMS, affordable, expanded_terms, is_zero, mp_values, scaled_block
+from phs._results import ResultMixin, draw_verdicts, finish, panels, require_pandas
 from phs._sparse import nonzero_entries
 from phs.errors import UnitError
 from phs.storage_bound import bounded_below
@@ -33,9 +34,21 @@ class CheckItem:
     worst: dict = field(default_factory=dict)
 
 
-@dataclass(frozen=True)
-class CheckReport:
-    """Readable report of :meth:`PHSystem.check`; ``ok`` is False if any check failed."""
+@dataclass(frozen=True, repr=False)
+class CheckReport(ResultMixin):
+    """Readable report of :meth:`PHSystem.check`; ``ok`` is False if any check failed.
+
+    ``bool(report)`` is ``report.ok`` (an undecided check does not make it False); ``report["units"]`` is
+    one :class:`CheckItem`; ``str(report)`` is the full text, ``repr`` one line; :meth:`plot` draws one
+    coloured row per check and :meth:`to_pandas` gives one row per check.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> rep = rc_circuit().check()
+    >>> bool(rep), rep  # doctest: +ELLIPSIS
+    (True, CheckReport('rc', ok: ... pass))
+    """
 
     system: str
     items: tuple[CheckItem, ...]
@@ -43,6 +56,9 @@ class CheckReport:
     @property
     def ok(self) -> bool:
         return all(i.verdict != "fail" for i in self.items)
+
+    def __bool__(self) -> bool:
+        return self.ok
 
     def __getitem__(self, name: str) -> CheckItem:
         for i in self.items:
@@ -67,6 +83,56 @@ class CheckReport:
         return "\n".join(lines)
 
     _repr_pretty_ = lambda self, p, cycle: p.text(str(self))  # noqa: E731
+
+    def _headline(self) -> str:
+        counts = {v: sum(i.verdict == v for i in self.items) for v in ("pass", "fail", "undecided")}
+        return (f"{self.system!r}, {'ok' if self.ok else 'FAILED'}: "
+                + ", ".join(f"{n} {v}" for v, n in counts.items() if n))
+
+    def _table(self) -> tuple[list, list]:
+        return ["check", "verdict", "method", "detail"], [(i.name, i.verdict, i.method, i.detail) for i in self.items]
+
+    def to_pandas(self):  # noqa: ANN201 - pandas is optional
+        """One row per check (verdict, method, detail), indexed by the check's name.
+
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> rc_circuit().check().to_pandas().loc["units", "verdict"]  # doctest: +SKIP
+        'pass'
+        """
+        pd = require_pandas("CheckReport.to_pandas()")
+        header, rows = self._table()
+        return pd.DataFrame({c: [r[k] for r in rows] for k, c in enumerate(header[1:], start=1)},
+                            index=pd.Index([r[0] for r in rows], name="check"))
+
+    def plot(self, path=None, *, ax=None):  # noqa: ANN201 - matplotlib is imported on demand
+        """One coloured row per check: green pass, red fail, amber undecided, with its detail.
+
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).
+        ax : matplotlib Axes, optional
+            Draw into this axes.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> from systems.examples import rc_circuit
+        >>> fig = rc_circuit().check().plot()
+        >>> fig.axes[0].texts[0].get_text()[:22]
+        'J skew-symmetric: pass'
+        """
+        fig, grid = panels(ax, 1, figsize=(9, 0.4 * len(self.items) + 0.9), what="CheckReport.plot")
+        draw_verdicts(grid[0, 0], [(i.name, i.verdict, i.detail) for i in self.items],
+                      title=f"structural checks of {self.system}: {'all passed' if self.ok else 'FAILED'}")
+        return finish(fig, path)
 
 
 def _blocks(M: sp.Matrix) -> list[list[int]]:

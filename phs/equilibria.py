@@ -26,12 +26,17 @@ import numpy as np
 import scipy.integrate
 import scipy.linalg
 
+from phs._results import ResultMixin, finish, panels, require_pandas
 from phs.errors import EquilibriumError, InputDataError
 
 
-@dataclass(frozen=True)
-class EquilibriumResult:
+@dataclass(frozen=True, repr=False)
+class EquilibriumResult(ResultMixin):
     """An equilibrium: state and input vectors, the scaled residual and how it was found.
+
+    ``eq["k.l"]`` is a state's value, :meth:`as_dict` all of them; :meth:`plot` draws the states (over their
+    typical sizes when the system gives them), :meth:`to_pandas` lists states and inputs.  It is accepted
+    wherever an operating point is, e.g. ``linearize(s, equilibrium(s, u=...))`` or ``certify(s, equilibrium=eq)``.
 
     Examples
     --------
@@ -39,6 +44,8 @@ class EquilibriumResult:
     >>> eq = equilibrium(mass_spring_damper(), u={"F": 2.0})
     >>> round(eq["k.l"], 9), eq.conserved
     (0.5, 0)
+    >>> eq  # doctest: +ELLIPSIS
+    EquilibriumResult('msd', m.p=..., k.l=0.5; F=2; stable, residual ...)
     """
 
     system_name: str
@@ -49,6 +56,9 @@ class EquilibriumResult:
     conserved: int
     dependent: tuple = ()
     info: dict = field(default_factory=dict)
+    input_names: tuple = ()
+    typical: tuple = ()
+    """The states' typical magnitudes (the scale :meth:`plot` divides by), when known."""
 
     def __getitem__(self, name: str) -> float:
         if name in self.state_names:
@@ -57,6 +67,75 @@ class EquilibriumResult:
 
     def as_dict(self) -> dict[str, float]:
         return dict(zip(self.state_names, map(float, self.x)))
+
+    def _inputs(self) -> list[str]:
+        return list(self.input_names) or [f"u[{k}]" for k in range(len(self.u))]
+
+    def _headline(self) -> str:
+        def point(keys, vals):
+            shown = ", ".join(f"{k}={float(v):.4g}" for k, v in list(zip(keys, vals))[:6])
+            return shown + (f", ... ({len(keys) - 6} more)" if len(keys) > 6 else "")
+
+        stable = self.info.get("stable")
+        return (f"{self.system_name!r}, {point(self.state_names, self.x)}; {point(self._inputs(), self.u) or 'no input'}"
+                + ("" if stable is None else "; stable" if stable else "; unstable")
+                + f", residual {self.residual:.2g}" + (f", {self.conserved} conserved" if self.conserved else ""))
+
+    def _table(self) -> tuple[list, list]:
+        rows = [(n, "state" + (" (dependent)" if n in self.dependent else ""), float(v))
+                for n, v in zip(self.state_names, self.x)]
+        rows += [(n, "input", float(v)) for n, v in zip(self._inputs(), self.u)]
+        return ["name", "kind", "value"], rows
+
+    def to_pandas(self):  # noqa: ANN201 - pandas is optional
+        """States and inputs, one row each (``kind``: state, dependent state or input; ``value``), indexed by name.
+
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> from systems.examples import mass_spring_damper
+        >>> equilibrium(mass_spring_damper(), u={"F": 2.0}).to_pandas().loc["k.l", "value"]  # doctest: +SKIP
+        0.5
+        """
+        pd = require_pandas("EquilibriumResult.to_pandas()")
+        header, rows = self._table()
+        return pd.DataFrame({c: [r[k] for r in rows] for k, c in enumerate(header[1:], start=1)},
+                            index=pd.Index([r[0] for r in rows], name="name"))
+
+    def plot(self, path=None, *, ax=None):  # noqa: ANN201 - matplotlib is imported on demand
+        """The equilibrium's states as horizontal bars, each divided by its typical size when known.
+
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).
+        ax : matplotlib Axes, optional
+            Draw into this axes.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> from systems.examples import mass_spring_damper
+        >>> fig = equilibrium(mass_spring_damper(), u={"F": 2.0}).plot()
+        >>> [t.get_text() for t in fig.axes[0].get_yticklabels()]   # top to bottom
+        ['m.p', 'k.l']
+        """
+        n = len(self.state_names)
+        fig, grid = panels(ax, 1, figsize=(7, 0.35 * n + 1.6), what="EquilibriumResult.plot")
+        a = grid[0, 0]
+        scale = np.asarray(self.typical, dtype=float) if len(self.typical) == n else np.ones(n)
+        a.barh(np.arange(n)[::-1], self.x / scale, color=["tab:gray" if s in self.dependent else "tab:blue"
+                                                          for s in self.state_names])
+        a.set_yticks(np.arange(n)[::-1], list(self.state_names))
+        a.axvline(0.0, color="k", lw=0.6)
+        a.set_xlabel("state / typical size [1]" if len(self.typical) == n else "state value")
+        u = ", ".join(f"{k}={float(v):.4g}" for k, v in zip(self._inputs(), self.u))
+        a.set_title(f"{self.system_name}: equilibrium at {u or 'zero input'}", fontsize=9)
+        return finish(fig, path)
 
 
 def _vector(system, spec, names, what, default) -> np.ndarray:
@@ -299,4 +378,4 @@ def equilibrium(system, u=None, x0=None, params=None, *, guess=None, tol: float 
         except EquilibriumError:
             pass
     return EquilibriumResult(system.name, tuple(names), x, uv, res, k, tuple(names[i] for i in dep),
-                             {"nfev": nfev, "stable": is_stable, "eigenvalues": ev})
+                             {"nfev": nfev, "stable": is_stable, "eigenvalues": ev}, tuple(system.input_names), tuple(s))

@@ -21,18 +21,21 @@ from codegen._solver_errors import describe
 from codegen.functions import generate
 from codegen.idapbc.model import state_vector
 from codegen.results import signal, write_csv_atomic
+from phs._results import ResultMixin, finish, panels, require_pandas
 from phs.errors import DomainError, InputDataError, SimulationError
 
 if TYPE_CHECKING:
+    import pandas as pd
     from matplotlib.figure import Figure
 
 
-class ClosedLoopResult:
+class ClosedLoopResult(ResultMixin):
     """A closed-loop trajectory: plant states, controller states, inputs, measured outputs and ``H_d``.
 
     ``res["tip"]``, ``res["seg1.theta"]``, ``res["U"]``, ``res["H_d"]`` (desired energy minus its value at
     the assigned equilibrium), ``res["H_cl"]`` (the closed loop's storage: ``H_d`` plus the integrator's
-    ``xi^T K_i xi / 2`` with passive integral action), ``res["xi"]``.
+    ``xi^T K_i xi / 2`` with passive integral action), ``res["xi"]``; :meth:`plot` draws the run,
+    :meth:`to_pandas` gives a DataFrame indexed by time.
 
     Examples
     --------
@@ -85,14 +88,67 @@ class ClosedLoopResult:
     def to_csv(self, path) -> None:
         write_csv_atomic(path, *self.table())
 
-    def plot(self, fig=None, reference=None) -> Figure:
-        """Target, inputs and ``H_d`` against time (a matplotlib figure)."""
-        ctrl = self.controller
-        if fig is None:
-            import matplotlib.pyplot as plt
+    def to_pandas(self) -> pd.DataFrame:
+        """Every signal of :attr:`columns` as a pandas DataFrame indexed by time ``t``; units in ``df.attrs["units"]``.
 
-            fig = plt.figure(figsize=(8, 7))
-        axes = fig.subplots(3, 1, sharex=True)
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen.idapbc import design
+        >>> from systems.examples import mass_spring_damper
+        >>> res = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).simulate(np.linspace(0, 5, 51))
+        >>> df = res.to_pandas()  # doctest: +SKIP
+        >>> round(float(df["position"].iloc[-1]), 2), df.attrs["units"]["H_d"]  # doctest: +SKIP
+        (0.5, 'J')
+        """
+        pd = require_pandas("ClosedLoopResult.to_pandas()")
+        header, data = self.table()
+        df = pd.DataFrame({name: data[:, k] for k, name in enumerate(header) if name != "t"},
+                          index=pd.Index(self.t, name="t"))
+        s = self.system
+        units = {"t": "s", "H_d": "J", "H_cl": "J"} | {st.name: st.unit for st in s.states}
+        units |= {i.name: i.unit for i in s.inputs} | {m.name: m.unit for m in s.measured}
+        df.attrs["units"] = {c: units[c] for c in header if c in units}
+        return df
+
+    def plot(self, path=None, *, ax=None, fig=None, reference=None) -> Figure:
+        """Targets (and their set points), controlled inputs and the closed loop's storage against time.
+
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).  A matplotlib Figure given
+            here is taken as ``fig`` (the earlier call form ``plot(fig)``).
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these three axes instead.
+        fig : matplotlib Figure, optional
+            Draw the three panels on this figure.
+        reference : ignored
+            Accepted for earlier callers; the set points are drawn from the controller's targets.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen.idapbc import design
+        >>> from systems.examples import mass_spring_damper
+        >>> res = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).simulate(np.linspace(0, 5, 51))
+        >>> [a.get_ylabel() for a in res.plot().axes]
+        ['target', 'input', 'H_d - H_d(x*) [J]']
+        """
+        if path is not None and hasattr(path, "subplots"):  # plot(fig): the earlier positional form
+            fig, path = path, None
+        ctrl = self.controller
+        if fig is not None and ax is None:
+            axes = fig.subplots(3, 1, sharex=True)
+        else:
+            fig, grid = panels(ax, 3, figsize=(8, 7), sharex=True, what="ClosedLoopResult.plot")
+            axes = grid[:, 0]
         for tg in ctrl.targets:
             axes[0].plot(self.t, self[tg.name], label=tg.name)
             axes[0].axhline(tg.value, color="k", ls=":", lw=1, label=f"{tg.name}* = {tg.value:g}")
@@ -103,13 +159,21 @@ class ClosedLoopResult:
         axes[2].plot(self.t, self.H_cl, label="H_d (+ integrator)" if ctrl.integral == "passive" else "H_d")
         axes[2].set_ylabel("H_d - H_d(x*) [J]")
         axes[2].set_xlabel("t [s]")
-        for ax in axes:
-            ax.grid(True, alpha=0.3)
-            ax.legend(loc="best", fontsize="small")
-        return fig
+        for a in axes:
+            a.grid(True, alpha=0.3)
+            a.legend(loc="best", fontsize="small")
+        return finish(fig, path)
 
-    def __repr__(self) -> str:
-        return f"ClosedLoopResult({self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g})"
+    def _headline(self) -> str:
+        return f"{self.system.name!r}, {len(self.t)} samples, t={self.t[0]:g}..{self.t[-1]:g}"
+
+    def _table(self) -> tuple[list, list]:
+        """Each target: its set point, final value and settling time (1 %); each controlled input's range."""
+        rows = [(tg.name, "target", tg.value, float(self[tg.name][-1]), self.settling_time(0.01, tg.name))
+                for tg in self.controller.targets]
+        rows += [(nm, "input", "", float(self[nm][-1]), f"{np.min(self[nm]):.4g}..{np.max(self[nm]):.4g}")
+                 for nm in self.controller.input_names]
+        return ["signal", "kind", "set point", "final", "settling time [s] / range"], rows
 
 
 def _plant_setup(ctrl, plant, params):

@@ -89,7 +89,7 @@ def test_simulation_to_pandas_has_every_signal_and_units(res, fake_pandas):
 def test_without_pandas_one_line_names_pip_install(res, fit, no_pandas, call):
     with pytest.raises(ImportError) as exc:
         call(res, fit)
-    assert "pip install pandas" in str(exc.value) and "\n" not in str(exc.value)
+    assert 'pip install "phs[pandas]"' in str(exc.value) and "\n" not in str(exc.value)
 
 
 def test_identification_to_pandas_one_row_per_parameter(fit, fake_pandas):

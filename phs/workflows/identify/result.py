@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from codegen.simulator import simulate
+from phs._results import ResultMixin, finish, names, panels
 from phs.workflows.identify.identifiability import analyse, combinations, rank_tolerance, unidentified
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
 from phs.workflows.identify.sensitivity_table import _sensitivity_table
@@ -21,9 +22,25 @@ if TYPE_CHECKING:
 _COLUMNS = ("parameter", "unit", "initial", "fitted", "std_error", "ci_low", "ci_high")
 
 
-@dataclass
-class IdentificationResult:
-    """Outcome of :func:`identify` (values in the parameters' own units)."""
+@dataclass(repr=False)
+class IdentificationResult(ResultMixin):
+    """Outcome of :func:`identify` (values in the parameters' own units).
+
+    :meth:`summary` is the readable report, :meth:`plot` the fit per channel, :meth:`to_pandas` one row per
+    fitted parameter; ``repr`` is one line and Jupyter shows small tables.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from codegen import simulate
+    >>> from phs.workflows.identify import identify
+    >>> from phs.workflows.recording import Recording
+    >>> from systems.examples import rc_circuit
+    >>> t = np.linspace(0, 0.01, 201); u = np.sin(2 * np.pi * 300 * t)
+    >>> rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc_circuit(), t, u={"U": u})["v_C"]})
+    >>> identify(rc_circuit(R=1.2e3), rec, ["R.R"])  # doctest: +ELLIPSIS
+    IdentificationResult('rc', fitted R.R, fit v_C 100.0 %, ... iterations)
+    """
 
     system: object
     free: list
@@ -115,7 +132,7 @@ class IdentificationResult:
         """One row per free parameter (initial, fitted, std error, 95 % interval) as a pandas DataFrame
         indexed by parameter name; the parameters' units in ``df.attrs["units"]``.
 
-        Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
 
         Examples
         --------
@@ -198,32 +215,54 @@ class IdentificationResult:
         self.sensitivity = _sensitivity_table(self, rec, steps, channel or self.outputs[0])
         return self.sensitivity
 
-    def plot(self, path=None, recording=None) -> Figure:
-        """Measured versus simulated for each channel (and residuals); returns the matplotlib figure.
+    def plot(self, path=None, recording=None, *, ax=None) -> Figure:
+        """Measured versus simulated for each fitted channel, with the fit % in the legend.
 
-        Axes are labelled ``name [unit]``; with ``path`` the figure is saved atomically in the format of
-        its suffix (either the whole file appears or, on any failure, nothing changes).
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix: either the whole file appears
+            or, on any failure, nothing changes).
+        recording : Recording, optional
+            The data to compare with (default: the training recording).
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these axes, one per fitted channel.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            Axes labelled ``name [unit]``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from phs.workflows.identify import identify
+        >>> from phs.workflows.recording import Recording
+        >>> from systems.examples import rc_circuit
+        >>> t = np.linspace(0, 0.01, 201); u = np.sin(2 * np.pi * 300 * t)
+        >>> rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc_circuit(), t, u={"U": u})["v_C"]})
+        >>> [a.get_ylabel() for a in identify(rc_circuit(R=1.2e3), rec, ["R.R"]).plot().axes]
+        ['v_C [V]']
         """
-        import matplotlib
-
-        from phs.workflows.figures import axis_label, save_figure
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from phs.workflows.figures import axis_label
 
         rec = recording if recording is not None else self._recording
         res = simulate(self.fitted_system, rec.t, u={u: rec.input_signal(u) for u in self.system.input_names}, x0=self.x0)
-        fig, axes = plt.subplots(len(self.outputs), 1, figsize=(8, 2.6 * len(self.outputs)), sharex=True, squeeze=False)
-        for ax, ch in zip(axes[:, 0], self.outputs, strict=True):
-            ax.plot(rec.t, rec[ch], lw=1, label="measured")
-            ax.plot(rec.t, res[ch], lw=1, label=f"model (fit {nrmse_fit(rec[ch], res[ch]):.1f} %)")
-            ax.set_ylabel(axis_label(ch, {m.name: m.unit for m in self.system.measured}.get(ch, "")))
-            ax.legend(fontsize=8)
-        axes[-1, 0].set_xlabel("t [s]")
-        fig.tight_layout()
-        if path is not None:
-            save_figure(fig, path, dpi=90)
-        return fig
+        fig, grid = panels(ax, len(self.outputs), figsize=(8, 2.6 * len(self.outputs)), sharex=True,
+                           what="IdentificationResult.plot")
+        for a, ch in zip(grid[:, 0], self.outputs, strict=True):
+            a.plot(rec.t, rec[ch], lw=1, label="measured")
+            a.plot(rec.t, res[ch], lw=1, label=f"model (fit {nrmse_fit(rec[ch], res[ch]):.1f} %)")
+            a.set_ylabel(axis_label(ch, {m.name: m.unit for m in self.system.measured}.get(ch, "")))
+            a.legend(fontsize=8)
+        grid[-1, 0].set_xlabel("t [s]")
+        return finish(fig, path, dpi=90)
+
+    def _headline(self) -> str:
+        fits = ", ".join(f"{ch} {v:.1f} %" for ch, v in list(self.fit_percent.items())[:4])
+        return (f"{self.system.name!r}, fitted {names(self.free, 4)}, fit {fits or 'none'}, "
+                f"{self.iterations} iterations")
 
 
 def _relative_scale(n_col: int, values: dict, nominal, free: list, log_scaled: list) -> np.ndarray:

@@ -9,8 +9,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from phs._results import ResultMixin, finish, names, panels
 from phs.errors import InputDataError
-from phs.workflows.figures import axis_label, save_figure
+from phs.workflows.figures import axis_label
 from phs.workflows.sweep.store import read_rows
 
 if TYPE_CHECKING:
@@ -18,7 +19,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-class StudyResult:
+class StudyResult(ResultMixin):
     """The rows of a study: one per run, as columns.
 
     Attributes
@@ -36,7 +37,8 @@ class StudyResult:
     units : dict of str -> str
         Units of the columns whose unit is known (parameters, metrics), for plots.
 
-    ``result[name]`` is a column; ``len(result)`` the number of runs.
+    ``result[name]`` is a column; ``len(result)`` the number of runs; :meth:`plot` draws each metric
+    against each variable, :meth:`to_pandas` gives one row per run.
 
     Examples
     --------
@@ -114,7 +116,14 @@ class StudyResult:
     def to_pandas(self) -> pd.DataFrame:
         """The rows as a pandas DataFrame, one per run; the known units in ``df.attrs["units"]``.
 
-        Needs pandas (``pip install pandas``); without it, an ImportError of one line says so.
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> r = StudyResult({"run": np.arange(2), "R.R": np.array([1e3, 2e3]), "status": np.array(["ok", "ok"])},
+        ...                 ["R.R"], [], units={"R.R": "Ohm"})
+        >>> r.to_pandas().attrs["units"]  # doctest: +SKIP
+        {'R.R': 'Ohm'}
         """
         from codegen.tables import require_pandas
 
@@ -159,17 +168,34 @@ class StudyResult:
         """
         return axis_label(column, self.units.get(column, ""))
 
-    def plot(self, path=None, metrics: Sequence[str] | None = None, variables: Sequence[str] | None = None) -> Figure:
+    def plot(self, path=None, metrics: Sequence[str] | None = None, variables: Sequence[str] | None = None, *,
+             ax=None) -> Figure:
         """Each metric against each variable (failed runs as red crosses on the lower edge).
 
         With two or more variables, points are coloured by the next variable; axes are labelled
-        ``name [unit]`` where the unit is known.  Returns the matplotlib figure, saved to ``path``
-        when given (atomically, in the format of its suffix: either the whole file appears or,
-        on any failure, nothing changes).
-        """
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
+        ``name [unit]`` where the unit is known.
 
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix: either the whole file appears
+            or, on any failure, nothing changes).
+        metrics, variables : sequence of str, optional
+            The rows and columns of the grid of panels (default: every metric, every variable).
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these axes, ``len(metrics) * len(variables)`` of them in reading order.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> r = StudyResult({"run": np.arange(2), "R.R": np.array([1e3, 2e3]), "n": np.array([0.6, 0.4]),
+        ...                  "status": np.array(["ok", "ok"])}, ["R.R"], ["n"], units={"R.R": "Ohm"})
+        >>> [(a.get_xlabel(), a.get_ylabel()) for a in r.plot().axes]
+        [('R.R [Ohm]', 'n')]
+        """
         metrics = list(metrics or self.metrics)
         variables = list(variables or self.variables)
         unknown = [c for c in metrics + variables if c not in self.columns]
@@ -177,9 +203,8 @@ class StudyResult:
             raise InputDataError(f"plot: no column {unknown[0]!r}")
         if not metrics or not variables:
             raise InputDataError("plot: need at least one metric and one variable column")
-        fig = Figure(figsize=(3.4 * len(variables) + 0.8, 2.6 * len(metrics)), constrained_layout=True)
-        FigureCanvasAgg(fig)
-        axes = fig.subplots(len(metrics), len(variables), squeeze=False)
+        fig, axes = panels(ax, len(metrics), len(variables), figsize=(3.4 * len(variables) + 0.8, 2.6 * len(metrics)),
+                           what="StudyResult.plot")
         ok = self.ok
         for i, m in enumerate(metrics):
             y = self.columns[m]
@@ -206,9 +231,19 @@ class StudyResult:
         if (~ok).any():
             axes[0, 0].legend(fontsize="small")
         fig.suptitle(f"{self.system_name}: {len(self)} runs ({int((~ok).sum())} failed)")
-        if path is not None:
-            save_figure(fig, path, dpi=100)
-        return fig
+        return finish(fig, path)
 
-    def __repr__(self) -> str:
-        return f"StudyResult({len(self)} runs, {int(self.ok.sum())} ok, columns {list(self.columns)})"
+    def _headline(self) -> str:
+        return (f"{self.system_name + ', ' if self.system_name else ''}{len(self)} runs, {int(self.ok.sum())} ok; "
+                f"variables {names(self.variables, 4) or 'none'}; metrics {names(self.metrics, 4) or 'none'}")
+
+    def _table(self) -> tuple[list, list]:
+        """Each metric's smallest, median and largest value over the successful runs (at most 20 metrics)."""
+        rows = []
+        for c in self.metrics[:20]:
+            v = self.columns[c][self.ok]
+            v = v[np.isfinite(v)]
+            rows.append((self.label(c), *((v.min(), np.median(v), v.max()) if len(v) else ("", "", "")), len(v)))
+        if len(self.metrics) > 20:
+            rows.append((f"... {len(self.metrics) - 20} more metrics", "", "", "", ""))
+        return ["metric", "min", "median", "max", "finite runs"], rows
