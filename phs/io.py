@@ -209,13 +209,15 @@ def write_atomic(path, data: str | bytes) -> None:
         raise
 
 
-def write_all_atomic(files, commit=None) -> None:
+def write_all_atomic(files, commit=None, create=()) -> None:
     """Write several files all or nothing: each to a temporary file beside it, then every rename.
 
     ``files`` maps paths to their text or bytes, or to a function ``write(path)`` that writes the
     file at the path it is given (the temporary one).  When any temporary file cannot be written, every
     one written so far is removed and no destination changes.  ``commit`` (a context manager
-    factory, optional) wraps the renames, e.g. to hold back interrupts while they run.
+    factory, optional) wraps the renames, e.g. to hold back interrupts while they run.  ``create``
+    names directories (a report's) made first, with their missing parents; those made here are
+    removed again, when still empty, if the writing fails.
 
     Raises
     ------
@@ -235,16 +237,38 @@ def write_all_atomic(files, commit=None) -> None:
     ...     except InputDataError as exc:
     ...         print(os.listdir(d), str(exc).startswith("cannot write"))
     [] True
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     rep = os.path.join(d, "rep")
+    ...     try:
+    ...         write_all_atomic({os.path.join(rep, "a.txt"): "A", os.path.join(d, "no", "b.txt"): "B"}, create=[rep])
+    ...     except InputDataError:
+    ...         print(os.listdir(d))
+    []
     """
     import contextlib
 
     staged = []
+    made: list[str] = []  # directories made here, outermost first
     try:
+        for directory in create:
+            missing = []
+            d = os.path.abspath(os.fspath(directory))
+            while not os.path.isdir(d) and d != os.path.dirname(d):
+                missing.append(d)
+                d = os.path.dirname(d)
+            for d in reversed(missing):
+                try:
+                    os.mkdir(d)
+                except OSError as exc:
+                    raise InputDataError(f"cannot create directory {os.fspath(directory)!r}: {exc.strerror or exc}") from None
+                made.append(d)
         for path, data in files.items():
             path = os.fspath(path)
             d = os.path.dirname(os.path.abspath(path))
             if not os.path.isdir(d):
                 raise InputDataError(f"cannot write {path!r}: directory {d!r} does not exist")
+            if os.path.isdir(path):  # its rename would fail after others were made
+                raise InputDataError(f"cannot write {path!r}: it is a directory")
             try:
                 fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.splitext(path)[1], dir=d)
             except OSError as exc:
@@ -269,10 +293,14 @@ def write_all_atomic(files, commit=None) -> None:
                 except OSError as exc:
                     raise InputDataError(f"cannot write {path!r}: {exc.strerror or exc}") from None
                 staged.pop(0)
+        made.clear()  # every file is in place: the directories stay
     finally:
         for tmp, _ in staged:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
+        for d in reversed(made):
+            with contextlib.suppress(OSError):
+                os.rmdir(d)  # only when empty: a file renamed into it keeps it
 
 
 # -- reading ------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from codegen._named import find_named
 from codegen.passivity._figures import _figures
 from codegen.passivity._result import PassivityTest, _fmt_point, _jsonable
 from phs.errors import InputDataError
-from phs.io import write_atomic
+from phs.io import write_all_atomic
 
 
 class PassivityReport:
@@ -89,11 +89,18 @@ class PassivityReport:
         """PNG figures of the tests that have data to plot, by file name."""
         return _figures(self)
 
+    def report_files(self) -> dict:
+        """The files of :meth:`write_report`, rendered in memory: ``{name: text or PNG bytes}``."""
+        figs = self.figures()
+        return {"report.json": json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n",
+                "report.txt": self.text() + "\n", "report.html": _html(self, figs), **figs}
+
     def write_report(self, directory) -> list[str]:
         """Write ``report.html`` (with the figures inline), ``report.json``, ``report.txt`` and the PNG figures.
 
-        Everything is rendered in memory first and each file is written atomically; the directory is
-        created if its parent exists.  Returns the paths written.
+        Everything is rendered in memory first and the files are written all or nothing
+        (:func:`phs.io.write_all_atomic`); the directory is created if its parent exists (and removed
+        again when the writing fails).  Returns the paths written.
         """
         import os
 
@@ -103,16 +110,9 @@ class PassivityReport:
             raise InputDataError(f"cannot write the report into {directory!r}: directory {parent!r} does not exist")
         if os.path.exists(directory) and not os.path.isdir(directory):
             raise InputDataError(f"cannot write the report into {directory!r}: it exists and is not a directory")
-        figs = self.figures()
-        files = {"report.json": json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n",
-                 "report.txt": self.text() + "\n", "report.html": _html(self, figs), **figs}
-        os.makedirs(directory, exist_ok=True)
-        paths = []
-        for name, data in files.items():
-            path = os.path.join(directory, name)
-            write_atomic(path, data)
-            paths.append(path)
-        return paths
+        files = {os.path.join(directory, name): data for name, data in self.report_files().items()}
+        write_all_atomic(files, create=[directory])
+        return list(files)
 
 
 def _html(report: PassivityReport, figs: dict[str, bytes]) -> str:

@@ -100,10 +100,11 @@ def _check_distinct(*options: tuple[str, str | None]) -> None:
         seen[key] = option
 
 
-def _write_outputs(files: dict) -> None:
+def _write_outputs(files: dict, create=()) -> None:
     """Write a command's prepared outputs ``{path: text or bytes}`` all or nothing
-    (:func:`phs.io.write_all_atomic`); a signal received before the renames stops the command with
-    nothing written (:mod:`phs.workflows.interrupts`).
+    (:func:`phs.io.write_all_atomic`, which makes the directories ``create`` first and removes them again
+    on a failure); a signal received before the renames stops the command with nothing written
+    (:mod:`phs.workflows.interrupts`).
 
     Examples
     --------
@@ -117,7 +118,7 @@ def _write_outputs(files: dict) -> None:
     from phs.workflows.interrupts import check, deferred
 
     check()
-    write_all_atomic(files, commit=deferred)
+    write_all_atomic(files, commit=deferred, create=create)
 
 
 def _name_list(text: str | None, option: str) -> list[str]:

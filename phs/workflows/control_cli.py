@@ -139,6 +139,9 @@ def run_control(args: argparse.Namespace) -> int:
     Everything (design, certificates, simulation, figure, C sources, JSON) is computed before the first
     file is written.
     """
+    report_names = [os.path.join(args.report, n) for n in _REPORT] if args.report is not None else []
+    _check_distinct(("--json", args.json), ("--report", args.report), *(("--report", f) for f in report_names))
+    _check_distinct(("--json", args.json), ("--export-c", args.export_c))  # one directory may take both
     _check_writable(args.json)
     _check_dir("--report", args.report)
     _check_dir("--export-c", args.export_c)
@@ -230,17 +233,11 @@ def run_control(args: argparse.Namespace) -> int:
     _check_distinct(*named)
     check()  # an interrupt an integrator swallowed stops the command before anything is written
     print(text)
-    created = [d for d in (args.report, args.export_c) if d is not None and not os.path.isdir(d)]
-    try:
-        for d in created:
-            os.makedirs(d)
-        _write_outputs(outputs)
-    except BaseException:
-        for d in created:
-            if os.path.isdir(d) and not os.listdir(d):
-                os.rmdir(d)  # all or nothing: not even the directories
-        raise
+    _write_outputs(outputs, create=[d for d in (args.report, args.export_c) if d is not None])  # removed on failure
     return 0 if report.passed and not unreached else 1
+
+
+_REPORT = ("controller.txt", "certificates.json", "closed_loop.png", "closed_loop.csv")  # --report DIR
 
 
 def _plant_x0(ctrl, system, x0: dict):

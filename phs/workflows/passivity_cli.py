@@ -24,8 +24,14 @@ import math
 import os
 
 from phs.errors import InputDataError
-from phs.io import write_atomic
-from phs.workflows.cli_options import _check_writable, _nonnegative_int, _positive, _time_grid
+from phs.workflows.cli_options import (
+    _check_distinct,
+    _check_writable,
+    _nonnegative_int,
+    _positive,
+    _time_grid,
+    _write_outputs,
+)
 from phs.workflows.cli_vocabulary import _add_model_options, add_deprecated_alias, add_option
 from phs.workflows.inputs import input_signals, parse_assignments, read_input_csv
 from phs.workflows.loader import load_model
@@ -154,9 +160,12 @@ def _trajectory(args, system, x0: dict):
 def run_passivity(args: argparse.Namespace) -> int:
     """Run ``phs passivity`` with parsed arguments; returns 0 (passive), 1 (not certified passive).
 
-    Every check runs and every output is rendered before the first file is written, so an error writes
-    nothing.
+    Every destination is checked (writable, no two options on one file) before any work; every check
+    runs and every output is rendered before the first file is written, and they are written all or
+    nothing (the report's directory included).
     """
+    report_names = [os.path.join(args.report, n) for n in _REPORT] if args.report is not None else []
+    _check_distinct(("--json", args.json), ("--report", args.report), *(("--report", f) for f in report_names))
     _check_writable(args.json)
     if args.report is not None:
         if os.path.exists(args.report) and not os.path.isdir(args.report):
@@ -180,19 +189,22 @@ def run_passivity(args: argparse.Namespace) -> int:
     report = certify(system, box=box, params=params or None, equilibrium=equilibrium, u=inputs or None, x0=x0 or None,
                      trajectory=trajectory, samples=args.box_samples, starts=args.starts, seed=args.seed)
     text = report.text()
-    document = None
+    files: dict[str, str | bytes] = {}  # every output of --report and --json: all written, or none
+    if args.report is not None:
+        files.update({os.path.join(args.report, n): data for n, data in report.report_files().items()})
+        _check_distinct(("--json", args.json), *(("--report", f) for f in files))  # the figures' names too
     if args.json:
         import phs
 
         doc = report.to_dict()
         doc.update({"command": "passivity", "model": args.model, "phs_version": phs.__version__})
-        document = json.dumps(doc, indent=1, allow_nan=False) + "\n"
+        files[args.json] = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     from phs.workflows.interrupts import check
 
     check()  # an interrupt an integrator swallowed stops the command before anything is written
     print(text)
-    if args.report is not None:
-        report.write_report(args.report)
-    if document is not None:
-        write_atomic(args.json, document)
+    _write_outputs(files, create=[args.report] if args.report is not None else [])
     return 0 if report.passive else 1
+
+
+_REPORT = ("report.html", "report.json", "report.txt")  # --report DIR, besides one PNG per figure

@@ -150,3 +150,99 @@ def test_write_all_atomic_stages_everything_before_renaming(tmp_path):
     assert keep.read_text() == "old" and _files(tmp_path) == ["a.txt"]
     write_all_atomic({keep: "new", tmp_path / "c.bin": np.arange(3, dtype=np.uint8).tobytes()})
     assert keep.read_text() == "new" and (tmp_path / "c.bin").read_bytes() == b"\x00\x01\x02"
+
+
+# -- diagnose, passivity and control: their reports with the JSON, all or nothing -----------------------
+DIAGNOSE = ["--free", "R.R", "--quiet", "--no-discover", "--effects", "leakage", "--jobs", "1"]  # the smallest diagnosis
+PASSIVITY = ["passivity", RC, "--box-samples", "16", "--starts", "0", "--input", "step(1, 1e-4)", "--t-end", "1e-3",
+             "--dt", "1e-4"]  # with a trajectory: the report holds a figure
+
+
+def test_diagnose_with_an_unwritable_report_is_refused_before_the_work(tmp_path, unwritable, recording, capsys):
+    report = str(unwritable / "rep")
+    assert main(["diagnose", RC, recording, *DIAGNOSE, "--report", report, "--json", str(tmp_path / "d.json")]) == 2
+    assert f"cannot write {report!r}" in _one_line_error(capsys)
+    assert _files(tmp_path) == []
+
+
+@pytest.mark.parametrize("inside", ["index.html", "", "diagnosis.json"])
+def test_diagnose_refuses_a_json_on_its_report(tmp_path, recording, capsys, inside):
+    report = tmp_path / "rep"
+    json_path = str(report / inside) if inside else str(report)
+    assert main(["diagnose", RC, recording, *DIAGNOSE, "--report", str(report), "--json", json_path]) == 2
+    assert "--json and --report both name" in _one_line_error(capsys)
+    assert not report.exists() and _files(tmp_path) == []
+
+
+def test_diagnose_writes_nothing_when_a_destination_vanishes_during_the_work(tmp_path, recording, monkeypatch, capsys):
+    import phs.workflows.diagnose.report as diagnose_report
+
+    elsewhere = tmp_path / "json"
+    elsewhere.mkdir()
+    rendered = diagnose_report.report_files
+
+    def render_then_lose_the_directory(d):
+        shutil.rmtree(elsewhere)  # after the checks, before the writing
+        return rendered(d)
+
+    monkeypatch.setattr(diagnose_report, "report_files", render_then_lose_the_directory)
+    report = tmp_path / "rep"
+    assert main(["diagnose", RC, recording, *DIAGNOSE, "--report", str(report), "--json", str(elsewhere / "d.json")]) == 2
+    assert "cannot write" in _one_line_error(capsys)
+    assert not report.exists() and _files(tmp_path) == []  # the report's directory made for it is removed again
+
+
+@pytest.mark.parametrize("which", ["--report", "--json"])
+def test_passivity_with_one_unwritable_output_writes_none(tmp_path, unwritable, capsys, which):
+    outs = {"--report": str(tmp_path / "rep"), "--json": str(tmp_path / "p.json")}
+    outs[which] = str(unwritable / os.path.basename(outs[which]))
+    assert main(PASSIVITY + [a for kv in outs.items() for a in kv]) == 2
+    assert f"cannot write {outs[which]!r}" in _one_line_error(capsys)
+    assert _files(tmp_path) == []
+
+
+@pytest.mark.parametrize("inside", ["report.json", "", "trajectory.png"])
+def test_passivity_refuses_a_json_on_its_report(tmp_path, capsys, inside):
+    report = tmp_path / "rep"
+    report.mkdir()  # so that a JSON inside it is writable, and only the clash refuses it
+    assert main(PASSIVITY + ["--report", str(report), "--json", str(report / inside) if inside else str(report)]) == 2
+    assert "--json and --report both name" in _one_line_error(capsys)  # a figure's name: found once it is drawn
+    assert _files(tmp_path) == []
+
+
+def test_passivity_writes_nothing_when_a_destination_vanishes_during_the_work(tmp_path, monkeypatch, capsys):
+    from codegen.passivity.report import PassivityReport
+
+    elsewhere = tmp_path / "json"
+    elsewhere.mkdir()
+    rendered = PassivityReport.report_files
+
+    def render_then_lose_the_directory(self):
+        shutil.rmtree(elsewhere)
+        return rendered(self)
+
+    monkeypatch.setattr(PassivityReport, "report_files", render_then_lose_the_directory)
+    report = tmp_path / "rep"
+    assert main(PASSIVITY + ["--report", str(report), "--json", str(elsewhere / "p.json")]) == 2
+    assert "cannot write" in _one_line_error(capsys)
+    assert not report.exists() and _files(tmp_path) == []
+    monkeypatch.undo()
+    assert main(PASSIVITY + ["--report", str(report), "--json", str(tmp_path / "p.json")]) == 0
+    assert {"report.html", "report.json", "report.txt", "trajectory.png"} <= set(os.listdir(report))
+
+
+@pytest.mark.parametrize("option", ["--report", "--export-c"])
+def test_control_refuses_a_json_on_its_directories(tmp_path, capsys, option):
+    d = str(tmp_path / "out")
+    argv = ["control", "systems.examples:mass_spring_damper", "--target", "position=0.5", "--rays", "4",
+            "--simulations", "1", option, d, "--json", d]
+    assert main(argv) == 2
+    assert f"--json and {option} both name {d!r}" in _one_line_error(capsys)
+    assert _files(tmp_path) == []
+
+
+def test_write_all_atomic_refuses_a_directory_before_any_rename(tmp_path):
+    report = tmp_path / "rep"
+    with pytest.raises(InputDataError, match="it is a directory"):
+        write_all_atomic({report / "a.txt": "A", report: "a file where the report's directory is"}, create=[report])
+    assert not report.exists() and _files(tmp_path) == []

@@ -7,7 +7,6 @@ import os
 import sys
 
 from phs.errors import InputDataError
-from phs.io import write_atomic
 
 
 def add_subcommand(sub) -> None:
@@ -52,14 +51,16 @@ def add_subcommand(sub) -> None:
 
 
 def run_diagnose(args: argparse.Namespace) -> int:
-    """Run ``phs diagnose``; every output is prepared before the first file is written.  Returns 0, or
-    :data:`EXIT_REFUSED` when the nominal model cannot describe the recording."""
+    """Run ``phs diagnose``; returns 0, or :data:`EXIT_REFUSED` when the nominal model cannot describe the
+    recording.  Every destination is checked (writable, no two options on one file) before any work, and
+    every output is prepared in memory and written all or nothing (the report's directory included)."""
     from components.candidates import LIBRARY
-    from phs.workflows.cli_options import _check_distinct, _check_writable, _name_list
+    from phs.workflows.cli_options import _check_distinct, _check_writable, _name_list, _write_outputs
     from phs.workflows.cli_recordings import model_and_recordings
 
     report = [os.path.join(args.report, n) for n in _REPORT] if args.report else []
-    _check_distinct(("--json", args.json), ("--discover-out", args.discover_out), *(("--report", f) for f in report))
+    _check_distinct(("--json", args.json), ("--discover-out", args.discover_out), ("--report", args.report),
+                    *(("--report", f) for f in report))
     _check_writable(args.json)
     if args.discover_out is not None:
         if args.discover is False:
@@ -78,25 +79,28 @@ def run_diagnose(args: argparse.Namespace) -> int:
     system, rec, val, free, outputs, x0 = model_and_recordings(args)
 
     from phs.workflows.diagnose import diagnose
-    from phs.workflows.diagnose.report import to_json
 
     d = diagnose(system, rec, validation=val, free=free or None, outputs=outputs, candidates=candidates, x0=x0 or None,
                  max_effects=args.max_effects, n_jobs=args.jobs, progress=not args.quiet, discover=args.discover)
     text = d.summary()
-    document = to_json(d) if args.json else None
-    emitted = d.discovered_source() if args.discover_out is not None and d.discovery is not None and d.discovery.found else None
+    files: dict[str, str | bytes] = {}  # every output of --report, --json and --discover-out: all written, or none
+    if args.report is not None:
+        from phs.workflows.diagnose.report import report_files
+
+        files.update({os.path.join(args.report, n): data for n, data in report_files(d).items()})
+    if args.json is not None:
+        from phs.workflows.diagnose.report import to_json
+
+        files[args.json] = to_json(d)
+    if args.discover_out is not None and d.discovery is not None and d.discovery.found:
+        emitted = d.discovered_source()
+        compile(emitted, args.discover_out, "exec")  # the emitted class is valid Python before anything is written
+        files[args.discover_out] = emitted
     from phs.workflows.interrupts import check
 
     check()  # an interrupt an integrator swallowed stops the command before anything is written
     print(text)
-    if args.report is not None:
-        d.write_report(args.report)
-    if document is not None:
-        write_atomic(args.json, document)
-    if emitted is not None:
-        from phs.workflows.diagnose.discover import write_source
-
-        write_source(args.discover_out, emitted)
+    _write_outputs(files, create=[args.report] if args.report is not None else [])
     if d.refused:  # the JSON and the report are written with the figures; the exit code says no verdict was reached
         from phs.workflows.diagnose.refusal import headline
 

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from phs.io import write_atomic
+from phs.io import write_all_atomic, write_atomic
 from phs.workflows.diagnose.mismatch import _features
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_VALIDATION_GAIN, _delta_bic, _gain, residual_change
 
@@ -221,10 +221,10 @@ def write_figures(d, directory, prefix: str) -> list[str]:
     return paths
 
 
-def write_report(d, directory) -> None:
-    """``index.html`` (figures embedded), ``fits.png``, ``hypotheses.png``, ``locate.png``,
-    ``diagnosis.json`` and ``summary.txt`` in ``directory`` (created if missing; each file atomic)."""
-    directory = os.fspath(directory)
+def report_files(d) -> dict:
+    """The files of the report, rendered in memory: ``{name: text or PNG bytes}`` for ``index.html``
+    (figures embedded), ``fits.png``, ``hypotheses.png``, ``locate.png`` (when something was located),
+    ``diagnosis.json`` and ``summary.txt``."""
     figs = {f"{name}.png": png for name, png in figures(d).items()}
     text = d.summary()
     js = to_json(d)
@@ -266,9 +266,11 @@ def write_report(d, directory) -> None:
         page += [f"<tr><td>{html.escape(f['hypothesis'])}</td><td>fit failed: {html.escape(f['error'])}</td></tr>" for f in failed]
         page.append("</table>")
     page.append("<h2>Summary</h2><pre>" + html.escape(text) + "</pre>")
-    os.makedirs(directory, exist_ok=True)
-    for name, data in figs.items():
-        write_atomic(os.path.join(directory, name), data)
-    write_atomic(os.path.join(directory, "diagnosis.json"), js)
-    write_atomic(os.path.join(directory, "summary.txt"), text + "\n")
-    write_atomic(os.path.join(directory, "index.html"), "\n".join(page))
+    return {**figs, "diagnosis.json": js, "summary.txt": text + "\n", "index.html": "\n".join(page)}
+
+
+def write_report(d, directory) -> None:
+    """Write :func:`report_files` into ``directory`` all or nothing (:func:`phs.io.write_all_atomic`;
+    the directory is created if missing, and removed again when the writing fails)."""
+    directory = os.fspath(directory)
+    write_all_atomic({os.path.join(directory, n): data for n, data in report_files(d).items()}, create=[directory])
