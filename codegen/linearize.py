@@ -11,7 +11,10 @@ identifiers: the port output ``U.i`` is ``U__i``).  The directions in which the
 structure ``[J - R, G - P]`` has a left null space at ``x_eq`` (Casimirs: quantities no input and
 no energy change can move, such as the curling HASEL's top-film length tied to its angle) are
 reported with the result (``ss.casimirs``): along them the linearisation has eigenvalues at zero
-that no controller can move.
+that no controller can move.  The operating point may be an :class:`~phs.equilibria.EquilibriumResult`
+(``linearize(s, equilibrium(s, u=...))``): its state and its input are used.  The result is a
+:class:`~codegen._linearization.LinearizationResult`, a ``control.StateSpace`` with a one-line ``repr``,
+``plot()`` (its poles) and ``to_pandas()``.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from phs.errors import InputDataError
 from phs.params import c_identifier
 
 if TYPE_CHECKING:
-    import control
+    from codegen._linearization import LinearizationResult
 
 _OUTPUTS = ("measured", "port", "all")
 
@@ -43,6 +46,26 @@ def _input_vector(system, u_eq) -> np.ndarray:
     if u.shape != (len(system.inputs),):
         raise InputDataError(f"u_eq: expected {len(system.inputs)} values (one per input), got {u.size}")
     return u
+
+
+def _operating_point(system, x_eq, u_eq):
+    """``(x_eq, u_eq)`` with an :class:`~phs.equilibria.EquilibriumResult` unpacked into its state and input
+    (checked to be one of ``system``'s; a ``u_eq`` given as well must be the equilibrium's)."""
+    from phs.equilibria import EquilibriumResult
+
+    if not isinstance(x_eq, EquilibriumResult):
+        return x_eq, u_eq
+    eq = x_eq
+    if tuple(eq.state_names) != tuple(system.state_names):
+        raise InputDataError(f"x_eq: the equilibrium of {eq.system_name!r} has states {', '.join(eq.state_names)}; "
+                             f"{system.name!r} has {', '.join(system.state_names)}")
+    u = np.asarray(eq.u, dtype=float).reshape(-1)
+    if u_eq is not None:
+        given = _input_vector(system, u_eq)
+        if given.shape != u.shape or not np.allclose(given, u, rtol=1e-12, atol=0.0):
+            raise InputDataError(f"u_eq {dict(zip(system.input_names, map(float, given)))} differs from the input of the "
+                                 f"equilibrium given as x_eq ({dict(zip(system.input_names, map(float, u)))}): give one of them")
+    return np.asarray(eq.x, dtype=float), u
 
 
 def _output_parts(system, outputs: str):
@@ -66,7 +89,7 @@ def casimir_directions(system, x_eq=None, params=None) -> np.ndarray:
     Parameters
     ----------
     system : PHSystem
-    x_eq : dict or array, optional
+    x_eq : dict, array or EquilibriumResult, optional
         State (default: the declared rest state).
     params : dict, optional
         Parameter overrides by name.
@@ -88,7 +111,7 @@ def casimir_directions(system, x_eq=None, params=None) -> np.ndarray:
 
     f = generate(system)
     sx = f.sx
-    x = state_vector(system, x_eq, "x_eq")
+    x = state_vector(system, _operating_point(system, x_eq, None)[0], "x_eq")
     p = system.param_vector(params)
     M = ca.Function("M", [sx["x"], sx["p"]], [ca.horzcat(sx["J"] - sx["R"], sx["G"] - sx["P"])])
     Mv = np.asarray(M(x, p), dtype=float).reshape(len(x), -1)
@@ -102,19 +125,21 @@ def casimir_directions(system, x_eq=None, params=None) -> np.ndarray:
     return rows
 
 
-def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measured") -> control.StateSpace:
+def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measured") -> LinearizationResult:
     """The linearisation of ``system`` at ``(x_eq, u_eq)`` as a named ``control.StateSpace``.
 
     Parameters
     ----------
     system : PHSystem
         The model.
-    x_eq : dict or array, optional
+    x_eq : dict, array or EquilibriumResult, optional
         Operating state, ``{name: value}`` (other states at their rest value) or one value per
         state; default: the declared rest state.  It need not be an equilibrium (the constant
-        term ``x'(x_eq, u_eq)`` is then dropped, as in ``control.linearize``).
+        term ``x'(x_eq, u_eq)`` is then dropped, as in ``control.linearize``).  An
+        :class:`~phs.equilibria.EquilibriumResult` (from :func:`phs.equilibrium`) gives the state and the input.
     u_eq : dict or array, optional
-        Operating input (default 0).
+        Operating input (default 0, or the input of an equilibrium given as ``x_eq``; given with one, it
+        must be the same).
     params : dict, optional
         Parameter overrides by name.
     outputs : {"measured", "port", "all"}
@@ -123,14 +148,16 @@ def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measure
 
     Returns
     -------
-    control.StateSpace
-        Named states (``ss.state_labels``), inputs and outputs (a ``.`` written ``__``), in physical units; its attribute
-        ``casimirs`` holds :func:`casimir_directions` at ``x_eq`` (rows over the states).
+    LinearizationResult
+        A ``control.StateSpace`` with named states (``ss.state_labels``), inputs and outputs (a ``.`` written ``__``),
+        in physical units; its attribute ``casimirs`` holds :func:`casimir_directions` at ``x_eq`` (rows over the
+        states), ``x_eq`` and ``u_eq`` the operating point by name.
 
     Raises
     ------
     InputDataError
-        For an unknown state or input, a vector of the wrong length, an unknown ``outputs``.
+        For an unknown state or input, a vector of the wrong length, an unknown ``outputs``, an equilibrium of
+        another system or a ``u_eq`` that differs from the equilibrium's input.
     ParameterError
         For an unknown parameter or a value of the wrong sign.
 
@@ -145,12 +172,19 @@ def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measure
            [ 1. ,  0. ]])
     >>> ss.casimirs.shape
     (0, 2)
-    """
-    import control
 
+    At an equilibrium found by :func:`phs.equilibrium` (its input is used):
+
+    >>> from phs import equilibrium
+    >>> msd = mass_spring_damper()
+    >>> linearize(msd, equilibrium(msd, u={"F": 2.0})).u_eq
+    {'F': 2.0}
+    """
+    from codegen._linearization import LinearizationResult
     from codegen.functions import generate
     from codegen.idapbc.model import state_vector
 
+    x_eq, u_eq = _operating_point(system, x_eq, u_eq)
     f = generate(system)
     sx = f.sx
     x = state_vector(system, x_eq, "x_eq")
@@ -169,7 +203,9 @@ def linearize(system, x_eq=None, u_eq=None, params=None, outputs: str = "measure
     if not all(np.all(np.isfinite(M)) for M in (A, B, C, D)):
         raise InputDataError(f"linearize: the Jacobians of {system.name!r} are not finite at x_eq "
                              f"({dict(zip(system.state_names, map(float, x)))})")
-    ss = control.ss(A, B, C, D, states=list(system.state_names), inputs=[c_identifier(n) for n in system.input_names],
-                    outputs=[c_identifier(n) for n in out_names], name=system.name)
+    ss = LinearizationResult(A, B, C, D, states=list(system.state_names), inputs=[c_identifier(n) for n in system.input_names],
+                             outputs=[c_identifier(n) for n in out_names], name=system.name)
     ss.casimirs = casimir_directions(system, x, params)
+    ss.x_eq = dict(zip(system.state_names, map(float, x)))
+    ss.u_eq = dict(zip(system.input_names, map(float, u)))
     return ss

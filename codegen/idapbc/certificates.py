@@ -44,6 +44,7 @@ from codegen._named import find_named
 from codegen.idapbc.closed_loop import simulate_closed_loop
 from codegen.idapbc.linear import closed_loop_modes, leaf_hessian
 from phs._json import jsonable as _jsonable
+from phs._results import ResultMixin, draw_verdicts, finish, panels, require_pandas
 from phs.errors import PHSError
 
 
@@ -66,16 +67,22 @@ class Certificate:
                 "numbers": _jsonable(self.numbers)}
 
 
-class CertificateReport:
+class CertificateReport(ResultMixin):
     """The certificates of one controller; ``passed`` when every one passed.
+
+    ``bool(report)`` is :attr:`passed` (an undecided certificate makes it False); ``report["hessian"]`` is one
+    :class:`Certificate`; ``str(report)`` is the full text, ``repr`` one line; :meth:`plot` draws one coloured
+    row per certificate and :meth:`to_pandas` gives one row per certificate.
 
     Examples
     --------
     >>> from codegen.idapbc import design
     >>> from systems.examples import mass_spring_damper
     >>> rep = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).certify(rays=8, simulations=2)
-    >>> rep["hessian"].verdict, rep.passed
-    ('pass', True)
+    >>> rep["hessian"].verdict, rep.passed, bool(rep)
+    ('pass', True, True)
+    >>> rep  # doctest: +ELLIPSIS
+    CertificateReport('msd', passed; matching pass, interconnection pass, ...)
     """
 
     def __init__(self, controller, items, info):
@@ -86,6 +93,9 @@ class CertificateReport:
     @property
     def passed(self) -> bool:
         return all(c.passed for c in self.items)
+
+    def __bool__(self) -> bool:
+        return self.passed
 
     def __getitem__(self, name: str) -> Certificate:
         return find_named(self.items, name, "certificate")
@@ -98,12 +108,62 @@ class CertificateReport:
     def __str__(self) -> str:
         return self.text()
 
-    def __repr__(self) -> str:
-        return f"CertificateReport(passed={self.passed}, " + ", ".join(f"{c.name}={c.verdict}" for c in self.items) + ")"
+    def _headline(self) -> str:
+        return (f"{self.controller.system.name!r}, {'passed' if self.passed else 'NOT ALL PASSED'}; "
+                + ", ".join(f"{c.name} {c.verdict}" for c in self.items))
+
+    def _table(self) -> tuple[list, list]:
+        return ["certificate", "verdict", "method", "summary"], [(c.name, c.verdict, c.method, c.summary) for c in self.items]
 
     def to_dict(self) -> dict:
         return {"system": self.controller.system.name, "passed": self.passed,
                 "certificates": {c.name: c.to_dict() for c in self.items}, "info": _jsonable(self.info)}
+
+    def to_pandas(self):  # noqa: ANN201 - pandas is optional
+        """One row per certificate (verdict, method, summary), indexed by its name.
+
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> from codegen.idapbc import design
+        >>> from systems.examples import mass_spring_damper
+        >>> rep = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).certify(rays=8, simulations=2)
+        >>> rep.to_pandas().loc["hessian", "verdict"]  # doctest: +SKIP
+        'pass'
+        """
+        pd = require_pandas("CertificateReport.to_pandas()")
+        header, rows = self._table()
+        return pd.DataFrame({c: [r[k] for r in rows] for k, c in enumerate(header[1:], start=1)},
+                            index=pd.Index([r[0] for r in rows], name="certificate"))
+
+    def plot(self, path=None, *, ax=None):  # noqa: ANN201 - matplotlib is imported on demand
+        """One coloured row per certificate: green pass, red fail, amber undecided, with its numbers.
+
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).
+        ax : matplotlib Axes, optional
+            Draw into this axes.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> from codegen.idapbc import design
+        >>> from systems.examples import mass_spring_damper
+        >>> rep = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).certify(rays=8, simulations=2)
+        >>> len(rep.plot().axes[0].texts) == len(rep.items)
+        True
+        """
+        fig, grid = panels(ax, 1, figsize=(9, 0.4 * len(self.items) + 0.9), what="CertificateReport.plot")
+        draw_verdicts(grid[0, 0], [(c.name, c.verdict, c.summary) for c in self.items],
+                      title=f"IDA-PBC certificates for {self.controller.system.name}: "
+                            + ("all passed" if self.passed else "NOT ALL PASSED"))
+        return finish(fig, path)
 
 
 # -- sampling on the leaf --------------------------------------------------------------------------

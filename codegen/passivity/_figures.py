@@ -9,25 +9,33 @@ import numpy as np
 from codegen.passivity._result import PassivityTest
 
 
+def _pair(fig):
+    """Two side-by-side axes of ``fig``, or ``fig`` itself when it is already a pair of axes."""
+    return fig.subplots(1, 2) if hasattr(fig, "subplots") else tuple(fig)
+
+
+def drawn(report) -> list:
+    """The tests of ``report`` that :func:`draw` has a figure for."""
+    return [t for t in report.tests if t.series and t.name in ("dissipation", "storage", "trajectory", "local")]
+
+
+def draw(test: PassivityTest, fig):
+    """Draw ``test`` on ``fig`` (a figure or a pair of axes) with the plot of its kind."""
+    if test.name in ("dissipation", "storage"):
+        return plot_box(test, fig)
+    return plot_energy(test, fig) if test.name == "trajectory" else plot_local(test, fig)
+
+
 def _figures(report) -> dict[str, bytes]:
     """PNG figures of the tests of a :class:`PassivityReport` that have data to plot, by file name."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     out = {}
-    for t in report.tests:
-        if not t.series:
-            continue
+    for t in drawn(report):
         fig = Figure(figsize=(9, 3.4), constrained_layout=True)
         FigureCanvasAgg(fig)
-        if t.name in ("dissipation", "storage"):
-            plot_box(t, fig)
-        elif t.name == "trajectory":
-            plot_energy(t, fig)
-        elif t.name == "local":
-            plot_local(t, fig)
-        else:
-            continue
+        draw(t, fig)
         fig.suptitle(f"{report.system.name}: {t.name} ({t.verdict})")
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=100)
@@ -54,7 +62,7 @@ def plot_box(test: PassivityTest, fig):
     corr = [abs(np.corrcoef(V[ok, j], vals[ok])[0, 1]) if np.ptp(V[ok, j]) > 0 and np.ptp(vals[ok]) > 0 else 0.0
             for j in range(V.shape[1])]
     j = int(np.argmax(np.nan_to_num(corr)))
-    ax1, ax2 = fig.subplots(1, 2)
+    ax1, ax2 = _pair(fig)
     neg = ok & (vals < 0) if key == "lambda" else np.zeros_like(ok)
     ax1.scatter(V[ok & ~neg, j], vals[ok & ~neg], s=6, alpha=0.5, label="samples")
     if np.any(neg):
@@ -96,7 +104,7 @@ def plot_energy(test: PassivityTest, fig):
     """
     s = test.series
     t = s["t"]
-    ax1, ax2 = fig.subplots(1, 2)
+    ax1, ax2 = _pair(fig)
     ax1.plot(t, s["supplied"], label="supplied ∫yᵀu dt")
     ax1.plot(t, s["stored"], label="stored H − H(0)")
     ax1.plot(t, s["dissipated"], label="dissipated")
@@ -139,7 +147,7 @@ def plot_local(test: PassivityTest, fig):
     """
     s = test.series
     w = s["omega"]
-    ax1, ax2 = fig.subplots(1, 2)
+    ax1, ax2 = _pair(fig)
     ax1.semilogx(w, s["nu_curve"])
     ax1.axhline(test.numbers["input_index"], color="k", ls=":", label=f"ν = {test.numbers['input_index']:.4g}")
     ax1.set_xlabel("ω [rad/s]")

@@ -9,13 +9,14 @@ import json
 import casadi as ca
 
 from codegen._named import find_named
-from codegen.passivity._figures import _figures
+from codegen.passivity._figures import _figures, draw, drawn
 from codegen.passivity._result import PassivityTest, _fmt_point, _jsonable
+from phs._results import ResultMixin, draw_verdicts, finish, panels, require_pandas
 from phs.errors import InputDataError
 from phs.io import write_all_atomic
 
 
-class PassivityReport:
+class PassivityReport(ResultMixin):
     """Passivity certificate of one system: the tests, their verdicts and the margin.
 
     Attributes
@@ -27,6 +28,10 @@ class PassivityReport:
         Smallest scaled eigenvalue of R over the box, or the (negative) one of ``[[R, P], [P^T, S]]`` when that
         has one: its sign is the dissipation verdict (scaling in :mod:`codegen.passivity`).
 
+    ``bool(report)`` is :attr:`passive` (an undecided required test makes it False: not certified);
+    ``report["storage"]`` is one :class:`PassivityTest`; ``str(report)`` is the full text, ``repr`` one line;
+    :meth:`plot` draws the tests that have data, :meth:`to_pandas` gives one row per test.
+
     Examples
     --------
     >>> from codegen.passivity import certify
@@ -34,6 +39,8 @@ class PassivityReport:
     >>> rep = certify(rlc_circuit(), samples=64, starts=1)
     >>> rep.passive, [t.verdict for t in rep.tests], round(rep.margin, 6)
     (True, ['pass', 'pass', 'pass', 'pass'], 1.0)
+    >>> bool(rep), rep
+    (True, PassivityReport('rlc', passive, margin 1; interconnection pass, dissipation pass, feedthrough pass, storage pass))
     >>> rep.to_dict()["tests"]["dissipation"]["verdict"]
     'pass'
     """
@@ -53,6 +60,9 @@ class PassivityReport:
         names = {t.name: t for t in self.tests}
         return (all(t.verdict != "fail" for t in self.tests)
                 and all(names[n].verdict == "pass" for n in self.REQUIRED if n in names))
+
+    def __bool__(self) -> bool:
+        return self.passive
 
     def __getitem__(self, name: str) -> PassivityTest:
         return find_named(self.tests, name, "test")
@@ -79,9 +89,70 @@ class PassivityReport:
     def __str__(self) -> str:
         return self.text()
 
-    def __repr__(self) -> str:
-        verdicts = ", ".join(f"{t.name}={t.verdict}" for t in self.tests)
-        return f"PassivityReport({self.system.name!r}, passive={self.passive}, margin={self.margin:.4g}, {verdicts})"
+    def _headline(self) -> str:
+        verdicts = ", ".join(f"{t.name} {t.verdict}" for t in self.tests)
+        return (f"{self.system.name!r}, {'passive' if self.passive else 'not certified passive'}, "
+                f"margin {self.margin:.4g}; {verdicts}")
+
+    def _table(self) -> tuple[list, list]:
+        return (["test", "verdict", "method", "numbers", "element"],
+                [(t.name, t.verdict, t.method, t.summary, t.element) for t in self.tests])
+
+    def to_pandas(self):  # noqa: ANN201 - pandas is optional
+        """One row per test (verdict, method, summary, element), indexed by the test's name; the margin in
+        ``df.attrs["margin"]``.
+
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> from codegen.passivity import certify
+        >>> from systems.examples import rlc_circuit
+        >>> certify(rlc_circuit(), samples=64, starts=1).to_pandas().loc["storage", "verdict"]  # doctest: +SKIP
+        'pass'
+        """
+        pd = require_pandas("PassivityReport.to_pandas()")
+        rows = [(t.name, t.verdict, t.method, t.summary, t.element) for t in self.tests]
+        df = pd.DataFrame({c: [r[k] for r in rows] for k, c in enumerate(["verdict", "method", "summary", "element"], 1)},
+                          index=pd.Index([r[0] for r in rows], name="test"))
+        df.attrs["margin"], df.attrs["passive"] = self.margin, self.passive
+        return df
+
+    def plot(self, path=None, *, ax=None):  # noqa: ANN201 - matplotlib is imported on demand
+        """A row of two panels per test with data (dissipation and storage over the box, the energy accounts
+        of a trajectory, the frequency indices of the local test); one coloured row per test when none has.
+
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these axes: two per test with data, in reading order (one when no test has data).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> from codegen.passivity import certify
+        >>> from systems.examples import rlc_circuit
+        >>> fig = certify(rlc_circuit(), samples=64, starts=1).plot()
+        >>> len(fig.axes), fig.axes[0].get_title()
+        (4, 'dissipation (pass)')
+        """
+        tests = drawn(self)
+        head = f"{self.system.name}: {'PASSIVE' if self.passive else 'NOT CERTIFIED PASSIVE'}, margin {self.margin:.4g}"
+        if not tests:
+            fig, grid = panels(ax, 1, figsize=(9, 0.4 * len(self.tests) + 0.9), what="PassivityReport.plot")
+            draw_verdicts(grid[0, 0], [(t.name, t.verdict, t.summary) for t in self.tests], title=head)
+            return finish(fig, path)
+        fig, grid = panels(ax, len(tests), 2, figsize=(9, 3.4 * len(tests)), what="PassivityReport.plot")
+        for t, pair in zip(tests, grid, strict=True):
+            draw(t, pair)
+            pair[0].set_title(f"{t.name} ({t.verdict})", fontsize=9)
+        fig.suptitle(head)
+        return finish(fig, path)
 
     _repr_pretty_ = lambda self, p, cycle: p.text(self.text())  # noqa: E731
 

@@ -29,7 +29,7 @@ def _unit_after_scale(column: str, scales: dict, file_units: dict) -> str | None
     return file_units.get(column)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Recording:
     """Sampled signals on a strictly increasing time grid, named as the model's signals.
 
@@ -53,9 +53,12 @@ class Recording:
 
     Examples
     --------
-    >>> rec = Recording.from_arrays(np.linspace(0, 1, 11), {"U": np.ones(11), "v_C": np.linspace(0, 1, 11)})
+    >>> rec = Recording.from_arrays(np.linspace(0, 1, 11), {"U": np.ones(11), "v_C": np.linspace(0, 1, 11)},
+    ...                             units={"U": "V"})
     >>> rec.names, rec.dt
     (['U', 'v_C'], 0.1)
+    >>> rec
+    Recording('<arrays>', 11 samples, t=0..1 s, dt=0.1 s; signals U [V], v_C)
     """
 
     t: np.ndarray
@@ -384,6 +387,13 @@ class Recording:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def __repr__(self) -> str:
+        """One line: the source, the time grid and the signals (at most eight named), never the samples."""
+        sigs = [f"{n} [{self.units[n]}]" if self.units.get(n) else n for n in self.signals]
+        shown = ", ".join(sigs[:8]) + (f", ... ({len(sigs) - 8} more)" if len(sigs) > 8 else "")
+        grid = f"t={self.t[0]:g}..{self.t[-1]:g} s, dt={self.dt:g} s" if len(self.t) > 1 else f"t={self.t[0]:g} s" if len(self.t) else ""
+        return f"Recording({self.source!r}, {len(self.t)} samples, {grid}; signals {shown or 'none'})"
 
     def input_signal(self, name: str) -> Signal:
         """The signal ``name`` as a simulation reads it: its course between the samples (:attr:`between`), its

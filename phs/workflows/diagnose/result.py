@@ -11,6 +11,7 @@ import numpy as np
 
 import phs.workflows.diagnose.refusal as refusal
 import phs.workflows.diagnose.report as report
+from phs._results import ResultMixin, finish, panels, require_pandas
 from phs.workflows.diagnose.ranking import (
     FAILED_FACTOR,
     MIN_BIC_GAIN,
@@ -26,10 +27,31 @@ if TYPE_CHECKING:
     from phs.system import PHSystem
 
 
-@dataclass
-class Diagnosis:
+@dataclass(repr=False)
+class Diagnosis(ResultMixin):
     """Outcome of :func:`~phs.workflows.diagnose.diagnose`: the nominal fit, the located mismatch, the ranked hypotheses,
-    the accepted effects and the final model.  ``to_dict()`` is the documented JSON."""
+    the accepted effects and the final model.  ``to_dict()`` is the documented JSON.
+
+    ``bool(diagnosis)`` is True when the model passes: nothing significant is missing (:attr:`effect` is
+    ``"none"``); it is False when an effect was named or the model cannot describe the recording (:attr:`refused`).
+    :meth:`summary` is the readable report, ``repr`` one line, :meth:`plot` the fit before and after on the
+    validation data, :meth:`to_pandas` one row per hypothesis.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from codegen import simulate
+    >>> from components.candidates import Offset
+    >>> from phs.workflows.diagnose import diagnose
+    >>> from phs.workflows.recording import Recording
+    >>> from systems.examples import rc_circuit
+    >>> t = np.linspace(0, 0.02, 401); u = np.sin(2 * np.pi * 150 * t)
+    >>> y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05   # a sensor offset
+    >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"], candidates=[Offset()],
+    ...              n_jobs=1)
+    >>> bool(d), d  # doctest: +ELLIPSIS
+    (False, Diagnosis('rc', verdict offset, confidence ...; fit v_C ... -> 100.0 % (validation), 1 hypotheses))
+    """
 
     system: object
     outputs: list
@@ -189,6 +211,110 @@ class Diagnosis:
                            fits, caption=head)
                 + f"<p>{html.escape(v['explanation'])}</p>"
                 + html_table(["hypothesis", "validation fit %", "ΔBIC", "validation residual change", "accepted"], hyps))
+
+    def __bool__(self) -> bool:
+        return self.verdict["effect"] == "none"
+
+    def _headline(self) -> str:
+        v = self.verdict
+        fits = ", ".join(f"{ch} {self.nominal.validation_fit_percent[ch]:.1f} -> {self.final.validation_fit_percent[ch]:.1f} %"
+                         for ch in self.outputs[:3])
+        return (f"{self.system.name!r}, verdict {v['effect']}, confidence {v['confidence']:.2f}; fit {fits} (validation), "
+                f"{len(self.hypotheses)} hypotheses")
+
+    def to_pandas(self):  # noqa: ANN201 - pandas is optional
+        """One row per ranked hypothesis (best first): its effect, where it attaches, validation fit % per channel,
+        ΔBIC against the nominal model, validation residual gain, stage and whether it was accepted.
+
+        Needs pandas (``pip install "phs[pandas]"``); without it, an ImportError of one line says so.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from components.candidates import Offset
+        >>> from phs.workflows.diagnose import diagnose
+        >>> from phs.workflows.recording import Recording
+        >>> from systems.examples import rc_circuit
+        >>> t = np.linspace(0, 0.02, 401); u = np.sin(2 * np.pi * 150 * t)
+        >>> y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+        >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"], candidates=[Offset()],
+        ...              n_jobs=1)
+        >>> d.to_pandas().loc["offset@v_C", "accepted"]  # doctest: +SKIP
+        True
+        """
+        pd = require_pandas("Diagnosis.to_pandas()")
+        hs = self.hypotheses
+        cols = {"effect": [h.augmentation.effect for h in hs], "attached_to": [h.augmentation.attached_to for h in hs]}
+        for ch in self.outputs:
+            cols[f"validation_fit_{ch}"] = [h.validation_fit_percent.get(ch, np.nan) if h.ok else np.nan for h in hs]
+        cols["delta_bic"] = [_delta_bic(self.nominal, h) if h.ok and math.isfinite(h.bic) else np.nan for h in hs]
+        cols["validation_gain"] = [_gain(self.nominal, h) if h.ok else np.nan for h in hs]
+        cols["stage"] = [h.stage for h in hs]
+        cols["accepted"] = [any(h is a for a in self.accepted) for h in hs]
+        cols["error"] = [h.error or "" for h in hs]
+        df = pd.DataFrame(cols, index=pd.Index([h.label for h in hs], name="hypothesis"))
+        df.attrs["verdict"] = self.verdict["effect"]
+        return df
+
+    def plot(self, path=None, *, ax=None):  # noqa: ANN201 - matplotlib is imported on demand
+        """Measured, nominal and final model on the validation data, and the residuals before and after: two
+        panels per fitted channel.
+
+        Parameters
+        ----------
+        path : str or path, optional
+            Write the figure there (atomically, in the format of its suffix).
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these axes, two per channel.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from codegen import simulate
+        >>> from components.candidates import Offset
+        >>> from phs.workflows.diagnose import diagnose
+        >>> from phs.workflows.recording import Recording
+        >>> from systems.examples import rc_circuit
+        >>> t = np.linspace(0, 0.02, 401); u = np.sin(2 * np.pi * 150 * t)
+        >>> y = simulate(rc_circuit(), t, u={"U": u})["v_C"] + 0.05
+        >>> d = diagnose(rc_circuit(), Recording.from_arrays(t, {"U": u, "v_C": y}), free=["R.R"], candidates=[Offset()],
+        ...              n_jobs=1)
+        >>> [a.get_ylabel() for a in d.plot().axes]
+        ['v_C', 'v_C residual']
+        """
+        if self.data is None:
+            from phs.errors import PHSError
+
+            raise PHSError(f"diagnosis of {self.system.name!r}: plot() needs the recordings, which this diagnosis does not hold")
+        data = self.data
+        t = np.asarray(data.validation.t)
+        mask = data.val_mask
+        fig, grid = panels(ax, 2 * len(self.outputs), figsize=(9, 4.8 * len(self.outputs)), sharex=True,
+                           what="Diagnosis.plot")
+        axes = grid[:, 0]
+        for k, ch in enumerate(self.outputs):
+            y = np.asarray(data.validation[ch])
+            yn = np.asarray(self.nominal.simulated["validation"][ch])
+            yf = np.asarray(self.final.simulated["validation"][ch])
+            a = axes[2 * k]
+            a.plot(t[mask], y[mask], lw=0.8, color="0.4", label="measured")
+            a.plot(t[mask], yn[mask], lw=1, label=f"nominal ({self.nominal.validation_fit_percent[ch]:.1f} %)")
+            a.plot(t[mask], yf[mask], lw=1, label=f"{self.effect} ({self.final.validation_fit_percent[ch]:.1f} %)")
+            a.set_ylabel(ch)
+            a.legend(fontsize=7, loc="upper right")
+            a = axes[2 * k + 1]
+            a.plot(t[mask], (y - yn)[mask], lw=0.7, label="residual, nominal")
+            a.plot(t[mask], (y - yf)[mask], lw=0.7, label="residual, final")
+            a.set_ylabel(f"{ch} residual")
+            a.legend(fontsize=7, loc="upper right")
+        axes[-1].set_xlabel("t [s] (validation)")
+        fig.suptitle(f"{self.system.name}: verdict {self.effect}")
+        return finish(fig, path, dpi=90)
 
     def write_report(self, directory) -> None:
         """HTML report with figures, and ``diagnosis.json``, into ``directory`` (written atomically)."""
