@@ -81,7 +81,7 @@ class LinearizationResult(ResultMixin, control.StateSpace):
         --------
         >>> from codegen.linearize import linearize
         >>> from systems.examples import mass_spring_damper
-        >>> linearize(mass_spring_damper()).to_pandas().loc["k.l", "m.p"]  # doctest: +SKIP
+        >>> float(linearize(mass_spring_damper()).to_pandas().loc["k.l", "m.p"])  # doctest: +SKIP
         1.0
         """
         pd = require_pandas("LinearizationResult.to_pandas()")

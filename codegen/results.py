@@ -276,7 +276,7 @@ class SimulationResult(ResultMixin):
         >>> from codegen import simulate
         >>> from systems.examples import rc_circuit
         >>> df = simulate(rc_circuit(), np.linspace(0, 1e-3, 5), u={"U": 1.0}).to_pandas()  # doctest: +SKIP
-        >>> df["v_C"].iloc[-1], df.attrs["units"]["v_C"]  # doctest: +SKIP
+        >>> float(df["v_C"].iloc[-1]), df.attrs["units"]["v_C"]  # doctest: +SKIP
         (0.6321..., 'V')
         """
         from codegen.tables import require_pandas

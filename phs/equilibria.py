@@ -95,7 +95,7 @@ class EquilibriumResult(ResultMixin):
         Examples
         --------
         >>> from systems.examples import mass_spring_damper
-        >>> equilibrium(mass_spring_damper(), u={"F": 2.0}).to_pandas().loc["k.l", "value"]  # doctest: +SKIP
+        >>> round(float(equilibrium(mass_spring_damper(), u={"F": 2.0}).to_pandas().loc["k.l", "value"]), 9)  # doctest: +SKIP
         0.5
         """
         pd = require_pandas("EquilibriumResult.to_pandas()")

@@ -100,7 +100,7 @@ class ClosedLoopResult(ResultMixin):
         >>> from systems.examples import mass_spring_damper
         >>> res = design(mass_spring_damper(), {"position": 0.5}, damping=1.0).simulate(np.linspace(0, 5, 51))
         >>> df = res.to_pandas()  # doctest: +SKIP
-        >>> round(float(df["position"].iloc[-1]), 2), df.attrs["units"]["H_d"]  # doctest: +SKIP
+        >>> round(float(df["position"].iloc[-1]), 1), df.attrs["units"]["H_d"]  # doctest: +SKIP
         (0.5, 'J')
         """
         pd = require_pandas("ClosedLoopResult.to_pandas()")

@@ -141,8 +141,8 @@ class IdentificationResult(ResultMixin):
         >>> from phs.workflows.recording import Recording
         >>> from systems.examples import mass_spring_damper
         >>> fit = identify(mass_spring_damper(), Recording.from_csv(recording_path("msd_two_tone")), ["k.K"])
-        >>> fit.to_pandas().loc["k.K", "fitted"]  # doctest: +SKIP
-        4.99...
+        >>> round(float(fit.to_pandas().loc["k.K", "fitted"]), 1)  # doctest: +SKIP
+        5.1
         """
         from codegen.tables import require_pandas
 
