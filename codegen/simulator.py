@@ -56,8 +56,8 @@ _CALLS_KEPT = 8
 
 
 def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: float | None = None,
-             method: str = "cvodes", compile: bool = False) -> SimulationResult:
-    """Simulate ``system`` on the time grid ``t``; see :class:`Simulator`.
+             method: str = "cvodes", compile: bool = False, progress=None) -> SimulationResult:
+    """Simulate ``system`` on the time grid ``t``; see :class:`Simulator` (``progress``: see :meth:`Simulator.run`).
 
     Examples
     --------
@@ -71,7 +71,7 @@ def simulate(system, t, u=None, x0=None, params=None, rtol: float = 1e-8, atol: 
         return discrete_gradient_simulate(system, t, u=u, x0=x0, params=params)
     if method != "cvodes":
         raise InputDataError(f"unknown simulation method {method!r}; use 'cvodes' or 'discrete_gradient'")
-    return simulator(system, rtol=rtol, atol=atol, compile=compile).run(t, u=u, x0=x0, params=params)
+    return simulator(system, rtol=rtol, atol=atol, compile=compile).run(t, u=u, x0=x0, params=params, progress=progress)
 
 
 def simulator(system, rtol: float = 1e-8, atol: float | None = None, max_steps: int = 20000,
@@ -237,7 +237,7 @@ class Simulator:
         return F, layout
 
     # -- running ------------------------------------------------------------------------------
-    def run(self, t, u=None, x0=None, params=None, *, signs: bool = True) -> SimulationResult:
+    def run(self, t, u=None, x0=None, params=None, *, signs: bool = True, progress=None) -> SimulationResult:
         """Integrate on the grid ``t`` and return a :class:`SimulationResult`.
 
         Parameters
@@ -258,6 +258,9 @@ class Simulator:
         signs : bool, optional
             ``False`` lets an override of the wrong sign through, for analyses that report what
             it does (the passivity certificate's what-if along a trajectory); never for a plain run.
+        progress : callable, optional
+            Called after each integrator call with the share of the time span done so far (0 to 1):
+            a progress bar's hook.
 
         Raises
         ------
@@ -301,6 +304,8 @@ class Simulator:
                 raise SimulationError(f"simulation of {s.name!r}: non-finite state at t={r.times[k] + plan.origin:.6g}: "
                                       + fmt_state(s, xs[k]))
             done.append((xs, r))
+            if progress is not None:
+                progress(float(r.times[-1]) / max(float(t[-1] - t[0]), 1e-300))
             r.store(X, xs)
             r.store(Q, qacc + qs)
             qacc = qacc + qs[-1]

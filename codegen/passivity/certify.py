@@ -17,7 +17,7 @@ from phs.structure_units import structure_unit_problems
 
 
 def certify(system, *, box: dict | None = None, params: dict | None = None, equilibrium=None, u=None, x0=None,
-            trajectory=None, samples: int = 2000, starts: int = 8, seed: int = 0) -> PassivityReport:
+            trajectory=None, samples: int = 2000, starts: int = 8, seed: int = 0, progress=None) -> PassivityReport:
     """Certify that ``system`` is passive over a box of states (and parameters), and say where it is not.
 
     Runs the tests of :mod:`codegen.passivity`: ``interconnection``, ``dissipation`` (the margin),
@@ -50,6 +50,9 @@ def certify(system, *, box: dict | None = None, params: dict | None = None, equi
         Starts of each ``nlpsol`` minimisation (the best half of the sample and random others).
     seed : int
         Seed of the sample and of the random starts.
+    progress : callable, optional
+        Called with the name of each stage as it starts (``"structure"``, ``"equilibrium"``, ``"trajectory"``,
+        ``"sampling"``, ``"dissipation"``, ``"storage"``): a progress bar's hook.
 
     Returns
     -------
@@ -82,17 +85,22 @@ def certify(system, *, box: dict | None = None, params: dict | None = None, equi
         if not isinstance(v, int) or isinstance(v, bool) or v < (1 if name == "samples" else 0):
             raise InputDataError(f"certify: {name} must be a {'positive' if name == 'samples' else 'nonnegative'} "
                                  f"integer, got {v!r}")
+    stage = progress if progress is not None else (lambda name: None)
     b = _resolve_box(system, box, params)
+    stage("structure")
     model = _model(system)
     checks = check_system(system, samples=16, seed=seed)
     violations = _sign_violations(system, b)
     symbolic = _symbolic_dissipation(system, checks, violations)
     local = None
     if equilibrium is not None or u is not None:
+        stage("equilibrium")
         local = local_passivity(system, None if equilibrium is True else equilibrium, u, params=params, x0=x0)
     traj = None
     if trajectory is not None:
+        stage("trajectory")
         traj = _trajectory(system, trajectory, params)
+    stage("sampling")
     V, info = _sample(model, b, samples, seed)
     tests = [_interconnection(system, checks)]
     wrong_units = structure_unit_problems(system)[0]  # a structure whose units disagree is no physical power balance
@@ -112,7 +120,9 @@ def certify(system, *, box: dict | None = None, params: dict | None = None, equi
             tests += [PassivityTest(n, "undecided", "sampled", why) for n in ("dissipation", "feedthrough", "storage")]
             margin = float("nan")
         else:
+            stage("dissipation")
             dtest, ftest, margin = _dissipation(model, b, V, X, P, valid, starts, seed, symbolic, system.param_vector())
+            stage("storage")
             tests += [dtest, ftest, _storage(model, b, V, X, P, valid, starts, seed, checks)]
     if traj is not None:
         tests.append(traj)

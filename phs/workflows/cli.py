@@ -6,7 +6,8 @@ Each subcommand is defined in its workflow's own module (``phs.workflows.simulat
 Errors the project raises on purpose (:class:`~phs.errors.PHSError`) are printed as one line
 ``phs: error: <message>`` with exit code 2, and no output file is written; an integrator's failure is
 printed in words (what happened, where, what to try: :mod:`codegen._solver_errors`), never as its
-return flag alone or the C++ file that reported it.  SIGINT and SIGTERM stop every subcommand with exit
+return flag alone or the C++ file that reported it; solvers' own warnings stay off the terminal unless
+``--verbose`` (:func:`phs.workflows.terminal.solver_chatter`).  SIGINT and SIGTERM stop every subcommand with exit
 code 130 and 143 (:mod:`phs.workflows.interrupts`), writing nothing for the work in flight.
 
 Examples
@@ -93,8 +94,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version and usage errors
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_ERROR)
     from phs.workflows.interrupts import Interrupted, received, watching
+    from phs.workflows.terminal import solver_chatter
 
-    with watching():  # SIGINT and SIGTERM stop the command, even inside an integrator that swallows them
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # the command as given, for the echo of a summary
+    with watching(), solver_chatter(getattr(args, "verbose", False)):  # solvers' own warnings only with --verbose
         try:
             return args.run(args)
         except Interrupted as exc:

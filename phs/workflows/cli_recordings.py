@@ -25,7 +25,7 @@ _INPUT_DETAIL = ("here the inputs come from the recordings, and only NAME=EXPR i
 
 def add_recording_options(p: argparse.ArgumentParser) -> None:
     """Options of the subcommands that fit a model to a recording (``fit``, ``diagnose``)."""
-    for name in ("--x0", "--scale", "--resample", "--outputs", "--validate", "--hold"):
+    for name in ("--x0", "--scale", "--resample", "--outputs", "--validate", "--hold", "--strict-ranges"):
         add_option(p, name)
     add_option(p, "--input", detail=_INPUT_DETAIL)
 
@@ -160,12 +160,30 @@ def _csv_header(path: str) -> list[str] | None:
     return None
 
 
+def _default_outputs(system, present) -> list[str]:
+    """The channels fitted without ``--outputs``: the measured outputs among the signals ``present``; only when
+    there is none, the port outputs and states among them (a file of ``phs simulate --out`` carries all three,
+    and a measured output that is a state would otherwise count twice).
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> _default_outputs(mass_spring_damper(), ["F", "k.l", "m.p", "F.v", "position"])
+    ['position']
+    >>> _default_outputs(mass_spring_damper(), ["F", "k.l"])
+    ['k.l']
+    """
+    measured = [m for m in system.measured_names if m in present]
+    if measured:
+        return measured
+    return [m for m in system.output_names + system.state_names if m in present]
+
+
 def _read_recording(path: str, system, args, mapping: dict, scales: dict, outputs: list[str], laws: dict):
     """Read the columns of ``path`` that the fit needs (inputs and fitted outputs) as a Recording; the inputs
     of ``laws`` (``--input``) that the file has no column for are filled from their laws (:func:`fill_inputs`)."""
     from phs.workflows.recording import Recording
 
-    known = system.measured_names + system.output_names + system.state_names
     column_of = {sig: col for col, sig in mapping.items()}
     header = _csv_header(path)
     columns = None
@@ -173,8 +191,8 @@ def _read_recording(path: str, system, args, mapping: dict, scales: dict, output
         if outputs:
             wanted = system.input_names + outputs
         else:
-            signal_of = {c: mapping.get(c, c) for c in header if c != args.time}
-            wanted = system.input_names + [signal_of[c] for c in signal_of if signal_of[c] in known]
+            present = [mapping.get(c, c) for c in header if c != args.time]
+            wanted = system.input_names + _default_outputs(system, present)
         columns = list(dict.fromkeys(column_of.get(sig, sig) for sig in wanted))
         absent = {column_of.get(u, u) for u in laws if column_of.get(u, u) not in header}
         columns = [c for c in columns if c not in absent]
@@ -233,9 +251,46 @@ def model_and_recordings(args: argparse.Namespace) -> tuple[PHSystem, Recording,
             raise InputDataError(f"--x0: system {system.name!r} has no state {unknown[0]!r} "
                                  f"(states: {', '.join(system.state_names)})")
     rec = _read_recording(args.data, system, args, mapping, scales, outputs, laws).in_units_of(system)
-    _, fitted_outputs = rec.check_for(system, outputs or None)
+    _, fitted_outputs = rec.check_for(system, outputs or _default_outputs(system, list(rec.signals)) or None)
     val = None
     if args.validate is not None:
         val = _read_recording(args.validate, system, args, mapping, scales, fitted_outputs, laws).in_units_of(system)
         val.check_for(system, fitted_outputs)
+    for r in (rec, val):
+        if r is not None:
+            say_input_ranges(system, r, getattr(args, "strict_ranges", False))
     return system, rec, val, free, fitted_outputs, x0
+
+
+def say_input_ranges(system, rec, strict: bool = False) -> list[str]:
+    """Say once, on stderr, which recorded inputs of ``rec`` lie outside their declared ranges
+    (:mod:`phs.workflows.ranges`); with ``strict`` (``--strict-ranges``) refuse the first.  Returns the sentences.
+
+    Raises
+    ------
+    InputDataError
+        With ``strict``, naming the recording, the input, the value reached and the range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from phs.workflows.recording import Recording
+    >>> from systems.msd_hasel import msd_hasel
+    >>> rec = Recording.from_arrays(np.arange(3) * 0.01, {"V": np.array([0.0, 3e4, 3e4]), "F_load": np.zeros(3),
+    ...                                                   "displacement": np.zeros(3)}, source="r.csv")
+    >>> say_input_ranges(msd_hasel(), rec, strict=True)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: r.csv: input 'V' of 'msd_hasel' reaches 30000 V, outside its declared range 0 to 6000 V ...
+    """
+    import sys
+
+    from phs.workflows.ranges import input_report, range_messages
+
+    report = input_report(system, rec.t, {u: rec[u] for u in system.input_names if u in rec.signals})
+    found = [f"{rec.source}: {m}" for m in range_messages({"inputs": report}, system.name)]
+    if found and strict:
+        raise InputDataError(found[0] + " (--strict-ranges)")
+    if found:
+        print("phs: warning: " + "; ".join(found) + " (--strict-ranges makes this an error)", file=sys.stderr, flush=True)
+    return found

@@ -72,6 +72,12 @@ OPTIONS: dict[str, _Option] = {
     "--plot": _Option("write a PNG figure to FILE", "FILE"),
     "--report": _Option("write a report directory DIR", "DIR"),
     "--quiet": _Option("no progress output on stderr", action="store_true", default=False),
+    "--progress": _Option("show progress bars on stderr even when it is not a terminal (default: only on a terminal)",
+                          action="store_true", default=False),
+    "--verbose": _Option("let solvers' own messages through to stderr (CasADi, IPOPT, SUNDIALS warnings)",
+                         action="store_true", default=False),
+    "--strict-ranges": _Option("make an input outside its declared range, or a state leaving its range, an error "
+                               "(default: a warning, once per run)", action="store_true", default=False),
 }
 
 
@@ -146,13 +152,15 @@ def _add_model_argument(p: argparse.ArgumentParser) -> None:
 
 
 def _add_model_options(p: argparse.ArgumentParser, csv: bool = True) -> None:
-    """The positional MODEL, ``--param`` and ``--json``; with ``csv`` (a subcommand that reads CSV
-    files) also ``--time`` and ``--map``."""
+    """The positional MODEL, ``--param``, ``--json``, ``--progress`` and ``--verbose``; with ``csv`` (a
+    subcommand that reads CSV files) also ``--time`` and ``--map``."""
     _add_model_argument(p)
     if csv:
         add_option(p, "--time")
         add_option(p, "--map")
     add_option(p, "--json")
+    add_option(p, "--progress")
+    add_option(p, "--verbose")
 
 
 def _options_of(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:

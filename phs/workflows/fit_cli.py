@@ -13,6 +13,7 @@ from phs.workflows.cli_options import _check_distinct, _check_writable, _finite_
 from phs.workflows.cli_recordings import add_recording_options, model_and_recordings
 from phs.workflows.cli_vocabulary import _add_model_options, add_option
 from phs.workflows.interrupts import check
+from phs.workflows.terminal import Bar, wanted
 
 
 def add_subcommand(sub) -> None:
@@ -37,7 +38,7 @@ def add_subcommand(sub) -> None:
     add_option(p, "--report", detail="fit.png, sensitivity.md and summary.txt")
     p.add_argument("--max-iter", type=_positive("--max-iter", integer=True), default=100, metavar="N",
                    help="maximum number of residual evaluations (default 100)")
-    add_option(p, "--quiet", detail="the optimiser's progress is not printed")
+    add_option(p, "--quiet", detail="no progress bar of the optimiser's residual evaluations")
     p.set_defaults(run=run_fit)
 
 
@@ -60,8 +61,13 @@ def run_fit(args: argparse.Namespace) -> int:
     # imported here: casadi is only needed once a model runs
     from phs.workflows.identify import identify, sensitivity_markdown
 
-    result = identify(system, rec, free, x0=x0 or None, outputs=fitted_outputs, validation=val,
-                      max_iter=args.max_iter, progress=not args.quiet)
+    with Bar(wanted(args), f"fit {system.name}", total=args.max_iter, unit="eval") as bar:
+        def step(evaluation: int, cost: float) -> None:
+            bar.update(1)
+            bar.stage(f"cost {cost:.4g}")
+
+        result = identify(system, rec, free, x0=x0 or None, outputs=fitted_outputs, validation=val,
+                          max_iter=args.max_iter, progress=step if wanted(args) else False)
     summary = _fit_summary_text(args, result)
     sensitivity = {}
     png = markdown = None
@@ -93,12 +99,30 @@ def run_fit(args: argparse.Namespace) -> int:
 _REPORT = ("fit.png", "sensitivity.md", "summary.txt")  # the files of --report DIR
 
 
-def _fit_summary_text(args: argparse.Namespace, result) -> str:
+def _echo(args: argparse.Namespace) -> str:
+    """The command as given (``phs VERSION fit MODEL DATA --free ...``), quoted for a shell; without the
+    arguments as given (a direct call of :func:`run_fit`), rebuilt from the parsed options that shape the fit."""
+    import shlex
+
     import phs
 
-    filled = "".join(f" --input {spec}" for spec in getattr(args, "input", None) or ())
-    head = [f"phs {phs.__version__} fit {args.model} {args.data}" + (f" --validate {args.validate}" if args.validate
-                                                                      else "") + filled,
+    argv = getattr(args, "argv", None)
+    if argv:
+        return f"phs {phs.__version__} {shlex.join(argv)}"
+    words = ["fit", args.model, args.data, "--free", args.free]
+    for option, value in (("--validate", args.validate), ("--outputs", args.outputs), ("--resample", args.resample),
+                          ("--time", None if args.time == "t" else args.time)):
+        if value is not None:
+            words += [option, str(value)]
+    for option, values in (("--param", args.param), ("--x0", args.x0), ("--map", args.map), ("--scale", args.scale),
+                           ("--hold", getattr(args, "hold", None)), ("--input", getattr(args, "input", None))):
+        for v in values or ():
+            words += [option, str(v)]
+    return f"phs {phs.__version__} {shlex.join(words)}"
+
+
+def _fit_summary_text(args: argparse.Namespace, result) -> str:
+    head = [_echo(args),
             f"model hash {result.system.model_hash()}; {len(result.residuals[result.outputs[0]])} samples; "
             f"outputs {', '.join(result.outputs)}"]
     return "\n".join(head + [result.summary()])

@@ -35,6 +35,7 @@ from phs.workflows.cli_options import (
 from phs.workflows.cli_vocabulary import _add_model_options, add_deprecated_alias, add_option
 from phs.workflows.inputs import input_signals, parse_assignments, read_input_csv
 from phs.workflows.loader import load_model
+from phs.workflows.terminal import Bar, wanted
 
 
 def add_subcommand(sub) -> None:
@@ -73,6 +74,7 @@ def add_subcommand(sub) -> None:
                    help="starts of each nlpsol minimisation (default 8)")
     add_option(p, "--seed", detail="of the sample of the box")
     add_option(p, "--report", detail="report.html (with plots), report.json, report.txt, *.png")
+    add_option(p, "--quiet", detail="no progress bar")
     p.set_defaults(run=run_passivity)
 
 
@@ -186,8 +188,19 @@ def run_passivity(args: argparse.Namespace) -> int:
     from codegen.passivity import certify  # imported here: casadi is only needed once a model runs
 
     equilibrium = (states or True) if args.equilibrium else None
-    report = certify(system, box=box, params=params or None, equilibrium=equilibrium, u=inputs or None, x0=x0 or None,
-                     trajectory=trajectory, samples=args.box_samples, starts=args.starts, seed=args.seed)
+    stages = ["structure"] + (["equilibrium"] if equilibrium or inputs else []) + (["trajectory"] if trajectory else []) \
+        + ["sampling", "dissipation", "storage"]
+    with Bar(wanted(args), f"passivity {system.name}", total=len(stages), unit="stage", ticking=True,
+             bar_format="{desc}: {n_fmt}/{total_fmt} stages |{bar}| {elapsed}{postfix}") as bar:
+        def stage(name: str) -> None:
+            if name in stages:
+                bar.to(stages.index(name))
+            bar.stage(name)
+
+        report = certify(system, box=box, params=params or None, equilibrium=equilibrium, u=inputs or None,
+                         x0=x0 or None, trajectory=trajectory, samples=args.box_samples, starts=args.starts,
+                         seed=args.seed, progress=stage)
+        bar.to(len(stages))
     text = report.text()
     files: dict[str, str | bytes] = {}  # every output of --report and --json: all written, or none
     if args.report is not None:

@@ -79,9 +79,10 @@ def run_diagnose(args: argparse.Namespace) -> int:
     system, rec, val, free, outputs, x0 = model_and_recordings(args)
 
     from phs.workflows.diagnose import diagnose
+    from phs.workflows.terminal import wanted
 
     d = diagnose(system, rec, validation=val, free=free or None, outputs=outputs, candidates=candidates, x0=x0 or None,
-                 max_effects=args.max_effects, n_jobs=args.jobs, progress=not args.quiet, discover=args.discover)
+                 max_effects=args.max_effects, n_jobs=args.jobs, progress=wanted(args), discover=args.discover)
     text = d.summary()
     files: dict[str, str | bytes] = {}  # every output of --report, --json and --discover-out: all written, or none
     if args.report is not None:

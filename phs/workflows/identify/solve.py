@@ -39,7 +39,7 @@ class _Stalled(Exception):
 
 def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, weights=None, log_scale=None,
              estimate_x0=(), validation=None, initial=None, rtol: float = 1e-8, atol: float | None = None,
-             max_iter: int = 100, ftol: float = 1e-8, shooting: int = 1, progress: bool = False,
+             max_iter: int = 100, ftol: float = 1e-8, shooting: int = 1, progress=False,
              compile: bool | None = None, ml_start: dict | None = None) -> IdentificationResult:
     """Fit parameters ``free`` of ``system`` to ``recording`` by output error.
 
@@ -87,8 +87,9 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         Stop when the relative decrease of the cost in a step is below this; also stops when
         :data:`STALL` trial points in a row, after a first decrease, do not lower the cost (the
         integration's resolution reached; message ``stalled``).
-    progress : bool
-        Print the cost at each iteration on stderr.
+    progress : bool or callable
+        Print the cost at each residual evaluation on stderr; a callable is called with the evaluation's
+        number and cost instead (a progress bar's hook).
     compile : bool, optional
         Run the simulation and its sensitivities as compiled C (cached on disk by a hash of the
         model, built once per model and number of fitted directions; results agree with the
@@ -196,7 +197,10 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         last.update(r=r)
         if progress:
             it[0] += 1
-            print(f"  identify {system.name}: evaluation {it[0]}, cost {0.5 * r @ r:.6g}", file=sys.stderr, flush=True)
+            if callable(progress):  # a progress bar's hook: (evaluation, cost)
+                progress(it[0], 0.5 * float(r @ r))
+            else:
+                print(f"  identify {system.name}: evaluation {it[0]}, cost {0.5 * r @ r:.6g}", file=sys.stderr, flush=True)
         return r
 
     def jac(z):

@@ -51,6 +51,7 @@ from phs.workflows.sweep.design import LogUniform, Uniform, from_fit
 from phs.workflows.sweep.metrics import metric
 from phs.workflows.sweep.run import sweep
 from phs.workflows.sweep.study import Study
+from phs.workflows.terminal import wanted
 
 #: Default of ``--max-failed``: a study in which more than half of the runs failed exits with an error.
 MAX_FAILED = 0.5
@@ -328,7 +329,7 @@ def run_sweep(args) -> int:
                   samples=args.samples or 0, sampling=args.sampling, seed=args.seed, metrics=metrics,
                   rtol=args.rtol, atol=args.atol)
     result = sweep(study, args.out, resume=args.resume, retry_failed=args.retry_failed, threads=args.threads,
-                   processes=args.processes, scheduler=args.scheduler, chunk_size=args.chunk, progress=not args.quiet)
+                   processes=args.processes, scheduler=args.scheduler, chunk_size=args.chunk, progress=wanted(args))
     files = {}
     if args.plot is not None:
         files[args.plot] = result.plot  # rendered into a temporary file beside --plot, renamed with the others
