@@ -152,6 +152,9 @@ class _Filtered:
         *lines, self._pending = self._pending.split("\n")
         for line in lines:
             self._line(line + "\n")
+        if "\r" in self._pending:  # a progress bar redrawing its line: no solver writes one, pass it at once
+            self.target.write(self._pending)
+            self._pending = ""
         return len(text)
 
     def _line(self, line: str) -> None:

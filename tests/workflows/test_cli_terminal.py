@@ -174,6 +174,9 @@ def test_solver_warnings_kept_off_stderr_unless_verbose(capsys, monkeypatch):
         return 0
 
     monkeypatch.setattr(list_cli, "run_list", chatty)
+    with solver_chatter():
+        sys.stderr.write("\rbar  50%")  # a bar redrawn in place (tqdm of a library) shows at once, not at the next newline
+        assert capsys.readouterr().err == "\rbar  50%"
     assert main(["list"]) == 0
     assert capsys.readouterr().err == "phs: warning: our own\n"
     with solver_chatter(verbose=True):
