@@ -17,7 +17,9 @@ stiffness ``k`` (state: its elongation ``e``, tension ``T = k e``) in series wit
 with ``mu = k/b2``, ``c = b1 mu``, ``beta = b0/(b2 V_a)``: with the plates held (``w_rel = 0``) the
 tension obeys ``T'' + b1 T' + b2 T = b0 V/V_a``, the paper's law for a step of amplitude ``V_a``.
 The coefficients are those of the operating amplitude ``V_a`` (the drive switches between 0 and
-``V_a``), so heating and cooling have the same time constants and the element is linear in V.  The
+``V_a``), so heating and cooling have the same time constants and the element is linear in V.  With
+``V_t`` given, the time coefficients ``b1, b2`` are taken at ``V_t`` instead (``b0`` stays at ``V_a``):
+every amplitude then shares one time course and the force scales with ``b0(V_a)``.  The
 tension acts on the backbone as the couple ``M = r T`` over the SVA's segment (``r`` the lever arm,
 positive on the side the segment bends towards); the plates' relative rotation ``w_rel`` shortens the
 spring, which gives the SVA the bending stiffness ``k r**2`` in series with its activation (``k`` small
@@ -88,18 +90,25 @@ class HydrogelActuator(Component):
         Series stiffness of the tendon [N/m].
     d : dict, optional
         Coefficients of eq. 8 as numbers or Params (default Table I).
+    V_t : float or Param, optional
+        Voltage [V] at which the time coefficients ``b1``, ``b2`` of eq. 8 are taken (default ``V_a``).
 
     Examples
     --------
     >>> pc = HydrogelActuator("sva1", V_a=3.6, r=3e-4).piece()
     >>> [s.state.name for s in pc.storages], pc.sources[0].info.name
     (['sva1.e', 'sva1.p'], 'V_sva1')
+    >>> [p.name for p in HydrogelActuator("sva2", V_a=1.8, V_t=1.08).piece().params][:4]
+    ['sva2.V_a', 'sva2.r', 'sva2.k', 'sva2.V_t']
     """
 
-    def __init__(self, name: str, input: str | None = None, V_a=3.6, r=3e-4, k=10.0, d=None):
+    def __init__(self, name: str, input: str | None = None, V_a=3.6, r=3e-4, k=10.0, d=None, V_t=None):
         super().__init__(name)
         require_positive(name, "V_a", V_a)
         require_positive(name, "k", k)
+        if V_t is not None:
+            require_positive(name, "V_t", V_t)
+        self.V_t = V_t
         if isinstance(r, (int, float)) and r == 0:
             raise ModelError(f"component {name!r}: the lever arm r must be nonzero")
         self.input = input or f"V_{name}".replace(".", "_")
@@ -109,12 +118,15 @@ class HydrogelActuator(Component):
         params, sym = [], {}
         for key, value, unit, desc in [("V_a", self.V_a, "V", "operating voltage amplitude"),
                                        ("r", self.r, "m", "lever arm of the tension"),
-                                       ("k", self.k, "N/m", "series stiffness of the tendon")] + [
+                                       ("k", self.k, "N/m", "series stiffness of the tendon")] + (
+                [("V_t", self.V_t, "V", "voltage of eq. 8's time coefficients b1, b2")] if self.V_t is not None else []) + [
                 (key, value, _D_UNITS[key], f"coefficient {key} of eq. 8") for key, value in self.d.items()]:
             s, decl = self._param(key, value, unit, desc)
             sym[key] = s
             params.extend(decl)
         b0, b1, b2 = force_coefficients(sym["V_a"], sym)
+        if "V_t" in sym:
+            _, b1, b2 = force_coefficients(sym["V_t"], sym)
         mu = sym["k"] / b2
         c, beta = b1 * mu, b0 / (b2 * sym["V_a"])
         e = self._state("e", None, "m", (-1.0, 1.0), "elongation of the tendon spring", "C", "translational", 5e-3)

@@ -25,7 +25,12 @@ clamp), strains on the elements (a staggered grid):
   ``"stiffness_proportional"`` takes ``B_e`` at the reference, so ``R = tau K_0`` is constant
   (stiffness-proportional Rayleigh damping: exact for small strain rates about the straight rod, not
   frame-indifferent for large rotations).  An optional viscous drag ``c_v h_k v_k`` on each node
-  (a linearised fluid drag) adds ``c_v h_k`` to the translational diagonal of R;
+  (a linearised fluid drag) adds ``c_v h_k`` to the translational diagonal of R; an optional quadratic
+  drag ``c_q h_k |v_k| v_k`` on each node (isotropic fluid drag, ``c_q`` in kg/m**2; the water drag
+  ``R C q ⊙ |q|`` of Doroudchi et al., eq. 5, with the speed ``|q|`` in place of each component's
+  magnitude: the same for motion across the rod) adds ``c_q h_k |v_k|`` to the translational diagonal of
+  R, with ``|v_k| = |p_k|/m_k`` from the momenta (smoothed as ``sqrt(|v_k|^2 + v_s^2)``, ``v_s`` a
+  thousandth of the typical velocity of :meth:`CosseratRod.scales`);
 
 In the strain coordinates the same structure reads ``eps' = D(q) v``, ``p' = -D(q)^T sigma``: the
 discrete differential operator ``D`` and its negative transpose, so the semi-discrete power balance
@@ -99,6 +104,8 @@ class CosseratRod(Component):
         Strain rates linearised at the reference (constant R, default) or geometrically exact.
     c_v : float, Param or expression
         Viscous drag per unit length [N*s/m**2] on the nodal velocities (0: none).
+    c_q : float, Param or expression
+        Quadratic drag per unit length [kg/m**2] on the nodal velocities, ``c_q |v| v`` (0: none).
     gravity : bool
         Include the weight ``(rho - rho_w) A g`` per unit length along ``-y``.
     g, rho_w : float, Param or expression
@@ -128,8 +135,8 @@ class CosseratRod(Component):
     """
 
     def __init__(self, name: str, n: int = 10, *, L=1.0, rho=1000.0, A=1e-4, I=1e-9, E=1e6, G=None,  # noqa: E741
-                 k_s=5 / 6, tau=0.0, damping: str = "stiffness_proportional", c_v=0.0, gravity: bool = False, g=9.81,
-                 rho_w=0.0, beta: float = 0.0,
+                 k_s=5 / 6, tau=0.0, damping: str = "stiffness_proportional", c_v=0.0, c_q=0.0, gravity: bool = False,
+                 g=9.81, rho_w=0.0, beta: float = 0.0,
                  tip: str = "free", distributed: Sequence[str] = (), node_forces: Sequence[int] = (),
                  couples: Sequence[int] = ()):
         super().__init__(name)
@@ -141,8 +148,9 @@ class CosseratRod(Component):
             raise ModelError(f"component {name!r}: the retardation time tau must be >= 0, got {tau}")
         if damping not in DAMPING:
             raise ModelError(f"component {name!r}: unknown damping {damping!r}; use one of {DAMPING}")
-        if isinstance(c_v, (int, float)) and c_v < 0:
-            raise ModelError(f"component {name!r}: the drag coefficient c_v must be >= 0, got {c_v}")
+        for key, value in (("c_v", c_v), ("c_q", c_q)):
+            if isinstance(value, (int, float)) and value < 0:
+                raise ModelError(f"component {name!r}: the drag coefficient {key} must be >= 0, got {value}")
         if tip not in TIP_LOADS:
             raise ModelError(f"component {name!r}: unknown tip load {tip!r}; use one of {TIP_LOADS}")
         bad = [d for d in distributed if d not in ("x", "y")]
@@ -155,8 +163,8 @@ class CosseratRod(Component):
             raise ModelError(f"component {name!r}: node_forces must be nodes in 1..{n} and couples elements in 1..{n} "
                              f"or node pairs (a, b) with 0 <= a < b <= {n}; got {wrong}")
         self.n = n
-        self.values = dict(L=L, rho=rho, A=A, I=I, E=E, G=E / 3 if G is None else G, k_s=k_s, tau=tau, c_v=c_v, g=g,
-                           rho_w=rho_w)
+        self.values = dict(L=L, rho=rho, A=A, I=I, E=E, G=E / 3 if G is None else G, k_s=k_s, tau=tau, c_v=c_v, c_q=c_q,
+                           g=g, rho_w=rho_w)
         self.damping = damping
         self.gravity, self.beta, self.tip = bool(gravity), float(beta), tip
         self.distributed, self.node_forces, self.couples = tuple(distributed), tuple(node_forces), tuple(couples)
@@ -166,10 +174,11 @@ class CosseratRod(Component):
               "I": ("m**4", "second moment of area"), "E": ("Pa", "Young's modulus"), "G": ("Pa", "shear modulus"),
               "k_s": ("1", "shear correction factor"), "tau": ("s", "Kelvin-Voigt retardation time"),
               "c_v": ("N*s/m**2", "viscous drag per unit length"),
+              "c_q": ("kg/m**2", "quadratic drag per unit length"),
               "g": ("m/s**2", "gravitational acceleration"), "rho_w": ("kg/m**3", "density of the surrounding fluid")}
 
     def _params(self):
-        keys = ["L", "rho", "A", "I", "E", "G", "k_s"] + [k for k in ("tau", "c_v") if self.values[k] != 0]
+        keys = ["L", "rho", "A", "I", "E", "G", "k_s"] + [k for k in ("tau", "c_v", "c_q") if self.values[k] != 0]
         keys += ["g", "rho_w"] if self.gravity else []
         syms, decls = {}, []
         for key in keys:
@@ -282,6 +291,8 @@ class CosseratRod(Component):
                 for i in range(2):
                     forces[k - 1][i] += P["c_v"] * hk * velocity(k)[i]
                 dissipated.append((f"drag{k}", P["c_v"] * hk * (velocity(k)[0] ** 2 + velocity(k)[1] ** 2)))
+            if "c_q" in P:
+                self._quadratic_drag(k, P["c_q"] * hk, m, (px, py), velocity(k), forces, dissipated, 1e-3 * sc["velocity"])
             if self.gravity:
                 weight.append((P["rho"] - P["rho_w"]) * P["A"] * hk * P["g"] * pose(k)[1])
         energy = [EnergyTerm(f"{self.name}.bending", sp.Add(*bending)),
@@ -311,6 +322,14 @@ class CosseratRod(Component):
         return Piece(self.name, storages=tuple(storages), energy=tuple(energy), ports=tuple(ports),
                      relations=tuple(relations), dissipators=dissipators, params=params, measured=measured,
                      references=("Simo, Vu-Quoc (1986); Reissner (1972): planar geometrically exact rod",))
+
+    @staticmethod
+    def _quadratic_drag(k, c, m, momenta, v, forces, dissipated, v_s) -> None:
+        """Add node ``k``'s quadratic drag ``c |v| v`` (``|v| = |p|/m``, smoothed) to its forces and powers."""
+        speed = sp.sqrt((momenta[0] ** 2 + momenta[1] ** 2) / m**2 + sp.Float(v_s) ** 2)
+        for i in range(2):
+            forces[k - 1][i] += c * speed * v[i]
+        dissipated.append((f"quadratic_drag{k}", c * speed * (v[0] ** 2 + v[1] ** 2)))
 
     def _load_ports(self, h, pose, velocity) -> tuple[list[Port], list[tuple]]:
         """Ports asked for and their loads as ``(node, dof, coefficient, port)``: the port's effort times

@@ -19,7 +19,12 @@ Deviations from the paper (each argued in ``docs/systems/hydrogel_arm.md``):
 * Young's modulus is chosen so that the first bending period is the reported 1.56 s (the printed
   2.005 kPa gives 2.3 s with this cross-section and the paper's density);
 * damping: Kelvin–Voigt with ``tau = 0.05 s`` (first-mode damping ratio 0.1); the printed
-  ``B = tau K`` with ``tau`` twice the period would make the arm overdamped (ratio 6.3);
+  ``B = tau K`` with ``tau`` twice the period would make the arm overdamped (ratio 6.3); the water drag
+  ``R C q|q|`` of eq. 5 is the rod's quadratic drag ``c_q`` with the paper's ``C = 0.0262 kg/m**2``
+  (``drag``), which adds a damping ratio of the order of 1e-4 at millimetre amplitudes;
+* ``lever`` may give the two rows different lever arms, and ``V_t`` takes eq. 8's time coefficients at one
+  voltage for all amplitudes (the reading under which Table II's voltage trend is reproduced, see
+  :mod:`systems.hydrogel_cases`);
 * gravity is left out by default: with the period-matched stiffness the buoyant weight would bend the
   arm far beyond the measured 0.29 mm sag (``gravity=True`` includes it with buoyancy).
 """
@@ -43,10 +48,12 @@ YOUNG = (2 * math.pi / PERIOD) ** 2 * DENSITY * AREA * LENGTH**4 / (1.875104069*
 """Young's modulus [Pa] giving the first clamped-free bending period ``PERIOD`` (about 4.3 kPa)."""
 LEVER = 2.9e-4  # m, effective lever arm of an SVA's tension (fitted to Table II, case 4)
 TAU = 0.05  # s, Kelvin-Voigt retardation time
+DRAG = 0.0262  # kg/m**2, water drag coefficient C of eq. 5 (Sec. V-A)
 
 
 def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17)), V_a: float = 3.6,
-                 tau: float = TAU, lever: float = LEVER, gravity: bool = False, E: float | None = None) -> PHSystem:
+                 tau: float = TAU, lever: float | tuple[float, float] = LEVER, gravity: bool = False,
+                 E: float | None = None, drag: float = DRAG, V_t: float | None = None) -> PHSystem:
     """The hydrogel arm as a port-Hamiltonian system.
 
     Parameters
@@ -59,12 +66,16 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
         Operating voltage amplitude [V] (eq. 8's coefficients are taken there).
     tau : float
         Kelvin–Voigt retardation time of the backbone [s].
-    lever : float
-        Effective lever arm of the SVA tension [m].
+    lever : float or (float, float)
+        Effective lever arm of the SVA tension [m], or one per row ``(upper, lower)``.
     gravity : bool
         Include the buoyant weight in water.
     E : float, optional
         Young's modulus [Pa] (default: matched to the 1.56 s period).
+    drag : float
+        Water drag coefficient ``C`` of eq. 5 [kg/m**2] (0: none).
+    V_t : float, optional
+        Voltage [V] at which eq. 8's time coefficients are taken for every SVA (default: ``V_a``).
 
     Returns
     -------
@@ -75,23 +86,30 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
     >>> arm = hydrogel_arm(per_segment=1, svas=[1, 9])
     >>> arm.input_names, len(arm.states)
     (['V1', 'V9'], 52)
+    >>> two = hydrogel_arm(per_segment=1, svas=[1, 9], lever=(2e-4, 3e-4))
+    >>> two.param("sva1.r").value, two.param("sva9.r").value
+    (0.0002, -0.0003)
     """
     bad = [i for i in svas if not (isinstance(i, int) and 1 <= i <= 16)]
     if bad or len(set(svas)) != len(svas):
         raise ModelError(f"hydrogel_arm: SVAs are numbered 1..16, each at most once; got {list(svas)}")
     if not isinstance(per_segment, int) or per_segment < 1:
         raise ModelError(f"hydrogel_arm: per_segment must be a positive integer, got {per_segment!r}")
+    levers = tuple(lever) if isinstance(lever, (tuple, list)) else (lever, lever)
+    if len(levers) != 2 or not all(isinstance(r, (int, float)) and r > 0 for r in levers):
+        raise ModelError(f"hydrogel_arm: lever must be a positive number or a pair (upper, lower) of them; got {lever!r}")
     m = per_segment
     segments = sorted({(i - 1) % SEGMENTS + 1 for i in svas})
     spans = [((j - 1) * m, j * m) for j in segments]
     rod = CosseratRod("rod", n=SEGMENTS * m, L=LENGTH, rho=DENSITY, A=AREA, I=SECOND_MOMENT, E=E or YOUNG,
-                      G=(E or YOUNG) / 3, tau=tau, gravity=gravity, rho_w=WATER, couples=spans)
+                      G=(E or YOUNG) / 3, tau=tau, c_q=drag, gravity=gravity, rho_w=WATER, couples=spans)
     comps, conns = [rod], []
     for j, (a, b) in zip(segments, spans):
         members = []
         for i in (j, j + SEGMENTS):
             if i in svas:
-                comps.append(HydrogelActuator(f"sva{i}", input=f"V{i}", V_a=V_a, r=lever if i <= SEGMENTS else -lever))
+                r = levers[0] if i <= SEGMENTS else -levers[1]
+                comps.append(HydrogelActuator(f"sva{i}", input=f"V{i}", V_a=V_a, r=r, V_t=V_t))
                 members.append(f"sva{i}.c")
         conns.append(series(f"rod.c{a}_{b}", *members))
     tip = Measured("tip", 1e3 * symbol_of_state(f"rod.uy{SEGMENTS * m}"), "mm", "tip deflection across the backbone")
@@ -99,4 +117,4 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
                         description="Hydrogel continuum arm (Doroudchi et al.): Cosserat backbone bent by hydrogel SVAs")
 
 
-__all__ = ["hydrogel_arm", "YOUNG", "LEVER", "TAU", "PERIOD"]
+__all__ = ["hydrogel_arm", "YOUNG", "LEVER", "TAU", "PERIOD", "DRAG"]
