@@ -61,6 +61,10 @@ class _BatchRun(SimulationResult):
 class BatchResult(ResultMixin):
     """Trajectories of the runs of a batch, in arrays shared with CasADi's outputs.
 
+    ``result[k]`` is run ``k`` as a :class:`~codegen.results.SimulationResult` (raising its error
+    if it failed); ``len(result)`` is the number of runs; :meth:`plot` overlays the runs,
+    :meth:`to_pandas` gives one row per run and sample.
+
     Attributes
     ----------
     t : array (nt,)
@@ -79,10 +83,6 @@ class BatchResult(ResultMixin):
         Derived signals evaluated for the whole batch (``"measured"``: (n, nt, n_measured), ...).
     seconds : float
         Wall time of the batch.
-
-    ``result[k]`` is run ``k`` as a :class:`~codegen.results.SimulationResult` (raising its error
-    if it failed); ``len(result)`` is the number of runs; :meth:`plot` overlays the runs,
-    :meth:`to_pandas` gives one row per run and sample.
 
     Examples
     --------

@@ -22,8 +22,10 @@ class LinearizationResult(ResultMixin, control.StateSpace):
     ----------
     casimirs : numpy.ndarray
         Rows spanning the conserved directions at the operating point (:func:`~codegen.linearize.casimir_directions`).
-    x_eq, u_eq : dict of str -> float
-        The operating point: state and input values by name.
+    x_eq : dict of str -> float
+        The operating point's state values by name.
+    u_eq : dict of str -> float
+        The operating point's input values by name.
 
     Examples
     --------

@@ -138,7 +138,7 @@ class SimulationResult(ResultMixin):
         return self._power[0]
 
     def energy_accounts(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(E_supplied, E_dissipated)``: supplied and dissipated energy since t[0] [J].
+        """``(E_supplied, E_dissipated)``: supplied and dissipated energy since ``t[0]`` [J].
 
         The integrator's own quadratures when the run has them (CVODES), otherwise the
         trapezoidal rule on the grid applied to :attr:`supplied` and :attr:`dissipated`.

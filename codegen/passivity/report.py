@@ -19,6 +19,10 @@ from phs.io import write_all_atomic
 class PassivityReport(ResultMixin):
     """Passivity certificate of one system: the tests, their verdicts and the margin.
 
+    ``bool(report)`` is :attr:`passive` (an undecided required test makes it False: not certified);
+    ``report["storage"]`` is one :class:`PassivityTest`; ``str(report)`` is the full text, ``repr`` one line;
+    :meth:`plot` draws the tests that have data, :meth:`to_pandas` gives one row per test.
+
     Attributes
     ----------
     passive : bool
@@ -27,10 +31,6 @@ class PassivityReport(ResultMixin):
     margin : float
         Smallest scaled eigenvalue of R over the box, or the (negative) one of ``[[R, P], [P^T, S]]`` when that
         has one: its sign is the dissipation verdict (scaling in :mod:`codegen.passivity`).
-
-    ``bool(report)`` is :attr:`passive` (an undecided required test makes it False: not certified);
-    ``report["storage"]`` is one :class:`PassivityTest`; ``str(report)`` is the full text, ``repr`` one line;
-    :meth:`plot` draws the tests that have data, :meth:`to_pandas` gives one row per test.
 
     Examples
     --------

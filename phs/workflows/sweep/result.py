@@ -22,12 +22,17 @@ if TYPE_CHECKING:
 class StudyResult(ResultMixin):
     """The rows of a study: one per run, as columns.
 
+    ``result[name]`` is a column; ``len(result)`` the number of runs; :meth:`plot` draws each metric
+    against each variable, :meth:`to_pandas` gives one row per run.
+
     Attributes
     ----------
     columns : dict of str -> array
         ``run``, the variables, the metric columns, ``status`` and ``error``.
-    variables, metrics : list of str
-        Variable columns and metric columns.
+    variables : list of str
+        Variable columns.
+    metrics : list of str
+        Metric columns.
     path : str or None
         The results file.
     seconds : float
@@ -36,9 +41,6 @@ class StudyResult(ResultMixin):
         Runs evaluated by that evaluation (the others came from a resumed file).
     units : dict of str -> str
         Units of the columns whose unit is known (parameters, metrics), for plots.
-
-    ``result[name]`` is a column; ``len(result)`` the number of runs; :meth:`plot` draws each metric
-    against each variable, :meth:`to_pandas` gives one row per run.
 
     Examples
     --------

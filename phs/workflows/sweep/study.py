@@ -15,6 +15,9 @@ from phs.workflows.sweep.metrics import Metric, as_metrics
 class Study:
     """A design study: one system, runs differing in parameters (and inputs or initial states), metrics.
 
+    Variables are parameters of the system or, with ``u_for``/``x0_for``, any other name those
+    functions read.
+
     Parameters
     ----------
     system : PHSystem
@@ -49,9 +52,6 @@ class Study:
         Integrator settings (:class:`codegen.simulator.Simulator`).
     energy : bool, optional
         Integrate the energy accounts (default: when a metric needs them).
-
-    Variables are parameters of the system or, with ``u_for``/``x0_for``, any other name those
-    functions read.
 
     Raises
     ------
