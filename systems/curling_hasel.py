@@ -46,6 +46,10 @@ Deviations from the printed paper (each discussed in ``docs/systems/curling_hase
   not the local term of eq. 17.
 * ``R0`` is per segment: each segment has its own branch driven by ``U``.
 * Units: ``U`` in volts and the input gain ``gamma1`` rescaled (see docs).
+* Electrical network (``network="referred"``, default): R0, R1, R2 of Table 4 multiplied and C1 divided
+  by ``REFERRAL = (2.0 / 0.04038)**2``, so that the currents seen by the source are those of the
+  paper's own scale (printed gain on U in kV): 33 mA peaks at a 5 kV step, microamperes of leakage;
+  ``network="printed"`` keeps Table 4's values (80 A peaks, tens of mA of leakage).
 """
 
 from __future__ import annotations
@@ -57,21 +61,44 @@ from phs import Measured, Param, PHSystem, interconnect, parallel, series, symbo
 from phs.errors import ModelError
 from systems._hasel import electrode_branch, pouch_parameters, shell
 
+#: the printed input gain 40.38 read on U in kV (the paper's own scale), as a gain on volts
+GAMMA1_PRINTED = 40.38e-3
+#: the default gain on volts (the rescaling of the docs page)
+GAMMA1_DEFAULT = 2.0
+#: (gamma1 / printed gamma1)**2: the factor by which the rescaling multiplies every conductance seen
+#: from the source; the "referred" network divides it out again (about 2453)
+REFERRAL = (GAMMA1_DEFAULT / GAMMA1_PRINTED) ** 2
+NETWORKS = ("referred", "printed")
 
-def default_parameters() -> dict[str, Param]:
+
+def default_parameters(network: str = "referred") -> dict[str, Param]:
     """The curling HASEL's parameters (Tables 3 and 4 and the documented choices).
+
+    Parameters
+    ----------
+    network : {"referred", "printed"}
+        ``"referred"`` (default): Table 4's R0, R1, R2 times ``REFERRAL`` and C1 divided by it, so that
+        the source sees the currents of the paper's own scale (milliampere peaks at 5 kV);
+        ``"printed"``: Table 4's values on the rescaled electrode voltage (ampere peaks, watts of
+        leakage).  See ``docs/systems/curling_hasel.md``.
 
     Examples
     --------
     >>> default_parameters()["K_b"].value
     0.04
+    >>> round(default_parameters()["R0"].value / 1e6, 3), default_parameters("printed")["R0"].value
+    (2.453, 1000.0)
     """
+    if network not in NETWORKS:
+        raise ModelError(f"curling_hasel: network must be 'referred' or 'printed', got {network!r}")
+    k = REFERRAL if network == "referred" else 1.0
+    note = " (Table 4 value referred through the gain rescaling)" if network == "referred" else ""
     P = pouch_parameters(L_e=0.015) + [
         Param("m", 0.007, "kg", "mass of one segment", (0.003, 0.015)),
-        Param("R0", 1e3, "Ohm", "connector resistance (per segment branch)", (1e2, 1e5)),
-        Param("R1", 1e6, "Ohm", "resistance of the charge-retention branch", (1e5, 1e7)),
-        Param("R2", 1.47e6, "Ohm", "leakage resistance across the electrodes", (1e5, 1e7)),
-        Param("C1", 1.75e-5, "F", "charge-retention capacitance", (1e-6, 1e-4)),
+        Param("R0", 1e3 * k, "Ohm", "connector resistance (per segment branch)" + note, (1e2 * k, 1e5 * k)),
+        Param("R1", 1e6 * k, "Ohm", "resistance of the charge-retention branch" + note, (1e5 * k, 1e7 * k)),
+        Param("R2", 1.47e6 * k, "Ohm", "leakage resistance across the electrodes" + note, (1e5 * k, 1e7 * k)),
+        Param("C1", 1.75e-5 / k, "F", "charge-retention capacitance" + note, (1e-6 / k, 1e-4 / k)),
         Param("K", 20.83, "N/m", "stiffness of the top film", (5.0, 50.0)),
         Param("K_b", 0.04, "N*m/rad", "torsional stiffness of the bottom film", (0.01, 0.1)),
         Param("b", 0.0031, "N*m*s/rad", "rotational damping", (0.0005, 0.01)),
@@ -84,7 +111,7 @@ def default_parameters() -> dict[str, Param]:
 
 
 def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: bool = True, drift: bool = True, untie=(),
-                  **overrides) -> PHSystem:
+                  network: str = "referred", **overrides) -> PHSystem:
     """Curling HASEL with ``n_segments`` segments sharing one voltage source.
 
     Parameters
@@ -100,6 +127,9 @@ def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: boo
         the paper before the drift was explained; ``C1``, ``R1`` and the states ``seg{i}.Q1`` go away).
     untie : sequence of str
         Shared parameters to declare per segment (``seg{i}.K_b``) instead of once.
+    network : {"referred", "printed"}
+        Values of R0, R1, R2, C1: Table 4's referred through the input-gain rescaling (default; source
+        current peaks of 33 mA at a 5 kV step, microamperes of leakage) or as printed (80 A peaks).
     **overrides : float
         Parameter values by name (``K_b=0.05``).
 
@@ -119,7 +149,7 @@ def curling_hasel(n_segments: int = 4, *, inertia: str = "segment", gravity: boo
         raise ModelError(f"curling_hasel: n_segments must be a positive integer, got {n_segments!r}")
     if inertia not in ("segment", "chain"):
         raise ModelError(f"curling_hasel: inertia must be 'segment' or 'chain', got {inertia!r}")
-    base = default_parameters()
+    base = default_parameters(network)
     unknown = [k for k in list(overrides) + list(untie) if k not in base]
     if unknown:
         raise ModelError(f"curling_hasel: unknown parameter(s) {unknown}; known: {sorted(base)}")

@@ -61,8 +61,8 @@ res = runs["AC 5 kV, 2 Hz"]
 fig, ax = plt.subplots(2, 1, figsize=(7, 4.5), sharex=True)
 ax[0].plot(res.t, res["U"] / 1e3)
 ax[0].set_ylabel("U [kV]")
-ax[1].plot(res.t, res["current"])
-ax[1].set_ylabel("source current [A]")
+ax[1].plot(res.t, res["current"] * 1e3)
+ax[1].set_ylabel("source current [mA]")
 ax[1].set_xlabel("t [s]")
 ax[1].set_xlim(0, 2)
 fig.tight_layout()
@@ -74,5 +74,8 @@ for name, r in runs.items():
     k1 = np.searchsorted(r.t, 1.0)
     print(f"{name:>14}: tip at 1 s {r['tip'][k1] * 1e3:.2f} mm, at {t_end:g} s {r['tip'][-1] * 1e3:.2f} mm, "
           f"drift {abs(r['tip'][-1] - r['tip'][k1]) * 1e3:.3f} mm, energy balance error {r.energy_balance_error():.2e}")
+print(f"current: peak {np.abs(res['current']).max() * 1e3:.2f} mA, at 1.2 s {res['current'][np.searchsorted(res.t, 1.2)] * 1e6:.2f} uA"
+      f" (AC 5 kV, 2 Hz); DC at 1 s {dc['current'][np.searchsorted(dc.t, 1.0)] * 1e6:.2f} uA, "
+      f"at {t_end:g} s {dc['current'][-1] * 1e6:.2f} uA")
 print(f"DC equilibrium tip {tip_inf * 1e3:.2f} mm; per-segment angles "
       + ", ".join(f"{eq[f'seg{i}.theta']:.4f}" for i in range(1, N + 1)))

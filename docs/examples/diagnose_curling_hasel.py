@@ -27,8 +27,8 @@ args = ap.parse_args()
 
 N = 2  # segments: two keep the run short; the model structure (per-segment drift branch) is the paper's
 X0 = {f"seg{i}.l_p": 0.015 for i in range(1, N + 1)}
-truth = curling_hasel(N)                 # with the retention branch C1 || R1 of every segment
-nominal = curling_hasel(N, drift=False)  # the model before the drift was explained
+truth = curling_hasel(N, network="printed")                 # with the retention branch C1 || R1 of every segment
+nominal = curling_hasel(N, drift=False, network="printed")  # the model before the drift was explained
 rng = np.random.default_rng(11)
 
 

@@ -24,7 +24,7 @@ X0 = {"seg1.l_p": 0.015, "seg2.l_p": 0.015}
 def _run():
     t = np.arange(6667) / 1000.0
     U = np.asarray(square(-2000.0, 0.1, offset=-2000.0)(t), dtype=float)
-    sim = Simulator(curling_hasel(2, drift=False).with_params(VALUES), energy=False)
+    sim = Simulator(curling_hasel(2, drift=False, network="printed").with_params(VALUES), energy=False)
     return sim.run(t, u={"U": Sampled(tuple(t), tuple(U))}, x0=X0)
 
 
