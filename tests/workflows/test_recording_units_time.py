@@ -147,6 +147,7 @@ def test_simulate_input_converts_header_units_and_refuses_others(tmp_path, capsy
         assert main(["simulate", MSD, "--t-end", "1", "--dt", "0.1", "--input", path, "--out", str(dest)]) == 0
         out.append(np.loadtxt(dest, delimiter=",", skiprows=1))
     assert np.allclose(out[0], out[1], rtol=1e-12, atol=1e-15)
+    capsys.readouterr()  # the runs' own stderr (k.l leaves its declared +-0.1 m: a warning) is not the refusal's
     bad = _write(tmp_path / "bad.csv", ["t", "F [m]"], t, f)
     msg = _cli_error(capsys, ["simulate", MSD, "--t-end", "1", "--input", bad, "--out", str(tmp_path / "x.csv")])
     assert "bad.csv" in msg and "'F'" in msg and "'m'" in msg and "'N'" in msg and msg.count("\n") == 1, msg
