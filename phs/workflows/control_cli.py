@@ -51,6 +51,7 @@ from phs.workflows.cli_vocabulary import _add_model_options, add_deprecated_alia
 from phs.workflows.inputs import parse_assignments
 from phs.workflows.interrupts import check
 from phs.workflows.loader import load_model
+from phs.workflows.terminal import Bar, wanted
 
 
 def add_subcommand(sub) -> None:
@@ -101,6 +102,7 @@ def add_subcommand(sub) -> None:
                    help="closed-loop runs from random states in that region (default 6)")
     p.add_argument("--export-c", metavar="DIR", help="write the control law as C source and header into DIR")
     add_option(p, "--report", detail="controller.txt, certificates.json, closed_loop.png/.csv")
+    add_option(p, "--quiet", detail="no progress bar")
     p.set_defaults(run=run_control)
 
 
@@ -168,16 +170,26 @@ def run_control(args: argparse.Namespace) -> int:
 
     from codegen.idapbc import design  # imported here: casadi is only needed once a model runs
 
-    ctrl = design(system, target, inputs=args.controlled or None, fixed_inputs=fixed, x0=x0 or None, neglect=neglect,
-                  structure=args.structure, damping=damping, stiffness=stiffness, integral=args.integral,
-                  integral_time=args.integral_time)
-    report = ctrl.certify(rays=args.rays, simulations=args.simulations)
-    text = ctrl.summary() + "\n" + report.text()
+    stages = ["design", "certificates"] + (["closed loop"] if t is not None else [])
     res = None
+    with Bar(wanted(args), f"control {system.name}", total=len(stages), unit="stage", ticking=True,
+             bar_format="{desc}: {n_fmt}/{total_fmt} stages |{bar}| {elapsed}{postfix}") as bar:
+        bar.stage("design")
+        ctrl = design(system, target, inputs=args.controlled or None, fixed_inputs=fixed, x0=x0 or None,
+                      neglect=neglect, structure=args.structure, damping=damping, stiffness=stiffness,
+                      integral=args.integral, integral_time=args.integral_time)
+        bar.to(1)
+        bar.stage("certificates")
+        report = ctrl.certify(rays=args.rays, simulations=args.simulations)
+        if t is not None:
+            bar.to(2)
+            bar.stage("closed loop")
+            start, loaded = _plant_x0(ctrl, system, x0, plant_params)
+            res = ctrl.simulate(t, plant=system, params=plant_params, x0=start)
+        bar.to(len(stages))
+    text = ctrl.summary() + "\n" + report.text()
     unreached: list[str] = []
-    if args.t_end is not None:
-        start, loaded = _plant_x0(ctrl, system, x0, plant_params)
-        res = ctrl.simulate(t, plant=system, params=plant_params, x0=start)
+    if res is not None:
         lines = [f"closed loop on {system.name!r}" + (f" with {', '.join(f'{k}={v:g}' for k, v in plant_params.items())}"
                                                       if plant_params else "") + f", {args.t_end:g} s"
                  + (f" from the loaded rest state ({loaded})" if loaded else "") + ":"]

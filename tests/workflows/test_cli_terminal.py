@@ -55,6 +55,16 @@ def test_passivity_progress_names_its_stages(capsys):
     assert "passivity rc" in err and "dissipation" in err and "4/4 stages" in err
 
 
+def test_control_progress_names_its_stages(capsys):
+    args = ["control", MSD, "--target", "position=0.5", "--stiffness", "k.l=6", "--damping", "2", "--rays", "8",
+            "--simulations", "2", "--t-end", "5", "--dt", "0.05"]
+    assert main(args) == 0
+    assert "stages" not in capsys.readouterr().err
+    assert main([*args, "--progress"]) == 0
+    err = capsys.readouterr().err
+    assert "control msd" in err and "closed loop" in err and "3/3 stages" in err
+
+
 def test_fit_progress_bar_instead_of_lines_in_piped_output(tmp_path, capsys):
     data = tmp_path / "r.csv"
     assert main(["simulate", MSD, "--t-end", "5", "--dt", "0.05", "--input", "square(1.0, 0.5)", "--out", str(data)]) == 0
