@@ -34,7 +34,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from codegen._domain import DomainCheck, fmt_state
+from codegen._domain import DomainCheck, fmt_state, gated
 from codegen._grid import step_windows, time_grid
 from codegen._inputs import initial_state, input_signals, run_sampled, segment_inputs
 from codegen._interpolants import _digest, _interpolant, interpolation
@@ -158,15 +158,19 @@ class Simulator:
         self._plan_calls: dict = {}
 
     # -- integrator construction ------------------------------------------------------------
-    def _integrator(self, n: int, slots, sampled, max_step: float = 1.0):
+    def _integrator(self, n: int, slots, sampled, max_step: float = 1.0, gate: bool = True):
         """CVODES integrator over ``n`` output steps for the given input templates and sampled inputs.
+
+        With ``gate`` the right-hand side is NaN outside the validity domain (:func:`codegen._domain.gated`),
+        so the integration stops where the domain is left; without it (only to locate where that was) it
+        goes on.
 
         ``sampled[j]`` is ``(times, values)`` for an input given by samples (baked into a linear
         interpolant: evaluation costs O(log n), not O(n)), else None.  With a sampled input the step
         is bounded by ``max_step`` output intervals (see :func:`step_windows`).
         """
         digests = [(g[2] if len(g) > 2 else _digest(g)) if g is not None else None for g in sampled]
-        key = (n, float(max_step), tuple(tuple(k for k, _, _ in sl) for sl in slots), tuple(digests))
+        key = (n, float(max_step), tuple(tuple(k for k, _, _ in sl) for sl in slots), tuple(digests), gate)
         hit = self._integrators.get(key)
         if hit is not None:
             return hit
@@ -206,10 +210,10 @@ class Simulator:
         uu = ca.vertcat(*uexpr) if nu else ca.SX(0, 1)
         x = z * self.scale
         subs_in = [sx["x"], sx["u"], sx["p"]]
-        xdot, supplied, dissipated, dparts = ca.substitute(
-            [sx["xdot"], sx["supplied"], sx["dissipated"], sx["dissipators"]], subs_in, [x, uu, pp]
+        xdot, supplied, dissipated, dparts, conditions = ca.substitute(
+            [sx["xdot"], sx["supplied"], sx["dissipated"], sx["dissipators"], sx["conditions"]], subs_in, [x, uu, pp]
         )
-        ode = h * xdot / self.scale
+        ode = h * (gated(xdot, conditions, z) if gate else xdot) / self.scale  # gated: CVODES stops outside the domain
         # dense: a lossless model's dissipated power is a structural zero, which CVODES refuses as a sparse output
         quad = ca.densify(h * ca.vertcat(supplied, dissipated, dparts)) if self.energy else ca.SX(0, 1)
         P = ca.vertcat(pp, a, h, *extra)
@@ -220,7 +224,7 @@ class Simulator:
             from codegen.compile import compiled
 
             # the key names the interpolants' kinds: a spline window and a linear one of the same samples are two libraries
-            dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[2:]}|{self.scale.tolist()}"
+            dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[2:]}|{self.scale.tolist()}|gated"
                                               + (f"|{kinds}" if kinds else ""))
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
                 "disable_internal_warnings": True, "show_eval_warnings": False}  # failures are reported as PHS errors instead
@@ -404,6 +408,7 @@ class Simulator:
                 tk = a + k * h
                 uk = self._eval_inputs(sigs, slots, choice, np.array([tk]))
                 self._check_domain(xs[None, :], np.array([tk + origin]), p, uk)
+                self._exit_within(zc, p, tk, h, layout, choice, slots, sampled, sigs, origin)
                 self._domain.predicted(xs, tk + origin, h, p, uk)
                 covered, step, zr = self._reach(F1, zc, p, tk, h, layout, choice, sampled)
                 if covered >= 1.0:  # shorter output steps pass through: the state where the interval starts
@@ -428,8 +433,18 @@ class Simulator:
         """``(covered, step, state)``: how far into the failed output interval ``[tk, tk + h]`` the integrator
         gets from the scaled state ``z`` with an output at each of :data:`REACH_SHARES`: the last share it
         reaches (0 when none; 1 when every one, the interval as a whole having failed), the longest of the
-        shorter output intervals it passed (as a share, 0 when none), and the scaled state it reached.
-        One call of an integrator of ``F1``'s equations and options, whose outputs land in numpy as they
+        shorter output intervals it passed (as a share, 0 when none), and the scaled state it reached."""
+        zs = self._at_shares(F1, z, p, tk, h, layout, choice, sampled)
+        ok = np.all(np.isfinite(zs), axis=1)
+        k = len(ok) if ok.all() else int(np.argmin(ok))  # outputs are written in order: the first not reached
+        if k == 0:
+            return 0.0, 0.0, z
+        covered = 1.0 if k == len(ok) else REACH_SHARES[k - 1]
+        return covered, float(np.max(np.diff((0.0,) + REACH_SHARES[:k]))), zs[k - 1]
+
+    def _at_shares(self, F1, z, p, tk, h, layout, choice, sampled) -> np.ndarray:
+        """Scaled states at :data:`REACH_SHARES` of ``[tk, tk + h]`` from ``z``, NaN from the first not reached:
+        one call of an integrator of ``F1``'s equations and options, whose outputs land in numpy as they
         are reached (a failure keeps the ones before it)."""
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
                 "disable_internal_warnings": True, "show_eval_warnings": False}
@@ -449,8 +464,22 @@ class Simulator:
         except RuntimeError:
             pass
         ok = np.all(np.isfinite(zs), axis=1)
-        k = len(ok) if ok.all() else int(np.argmin(ok))  # outputs are written in order: the first not reached
-        if k == 0:
-            return 0.0, 0.0, z
-        covered = 1.0 if k == len(ok) else REACH_SHARES[k - 1]
-        return covered, float(np.max(np.diff((0.0,) + REACH_SHARES[:k]))), zs[k - 1]
+        if not ok.all():
+            zs[int(np.argmin(ok)):] = np.nan
+        return zs
+
+    def _exit_within(self, z, p, tk, h, layout, choice, slots, sampled, sigs, origin: float = 0.0) -> None:
+        """The integration of ``[tk, tk + h]`` from the scaled state ``z`` (inside the domain) failed: integrate
+        it again without the domain's gate, with outputs at :data:`REACH_SHARES`, and raise the
+        :class:`~phs.errors.DomainError` of the first output outside the validity domain, if any (the
+        gate, :func:`codegen._domain.gated`, stopped the integration there)."""
+        if not self.system.conditions:
+            return
+        F1, _ = self._integrator(1, slots, sampled, gate=False)
+        zs = self._at_shares(F1, z, p, tk, h, layout, choice, sampled)
+        k = int(np.sum(np.all(np.isfinite(zs), axis=1)))
+        if k:
+            times = tk + h * np.asarray(REACH_SHARES[:k])
+            with np.errstate(all="ignore"):
+                uu = self._eval_inputs(sigs, slots, choice, times)
+            self._check_domain(zs[:k] * self.scale, times + origin, p, uu)
