@@ -250,7 +250,7 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
         s_xi[~np.isfinite(s_xi) | (s_xi == 0)] = 1.0
     Z = ca.SX.sym("z", n + nxi)
     X = Z[:n] * ca.DM(s)
-    Xi = Z[n:] * ca.DM(s_xi)
+    Xi = Z[n:] * ca.DM(s_xi) if nxi else ca.SX(0, 1)  # a one-state plant: Z[1:] of a 1x1 Z is 1x0, not 0x1
     Xd = X[idx]
     u_ctrl = fx["law"](Xd, Xi)
     ranges = [plant.inputs[plant.input_names.index(nm)].range for nm in ctrl.input_names]
