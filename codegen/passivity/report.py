@@ -161,7 +161,15 @@ class PassivityReport(ResultMixin):
         return _figures(self)
 
     def report_files(self) -> dict:
-        """The files of :meth:`write_report`, rendered in memory: ``{name: text or PNG bytes}``."""
+        """The files of :meth:`write_report`, rendered in memory: ``{name: text or PNG bytes}``.
+
+        Examples
+        --------
+        >>> from codegen.passivity import certify
+        >>> from systems.examples import rc_circuit
+        >>> sorted(certify(rc_circuit(), samples=16, starts=0).report_files())
+        ['dissipation.png', 'report.html', 'report.json', 'report.txt', 'storage.png']
+        """
         figs = self.figures()
         return {"report.json": json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n",
                 "report.txt": self.text() + "\n", "report.html": _html(self, figs), **figs}

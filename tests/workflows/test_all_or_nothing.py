@@ -179,13 +179,13 @@ def test_diagnose_writes_nothing_when_a_destination_vanishes_during_the_work(tmp
 
     elsewhere = tmp_path / "json"
     elsewhere.mkdir()
-    rendered = diagnose_report.report_files
+    rendered = diagnose_report._report_files
 
     def render_then_lose_the_directory(d):
         shutil.rmtree(elsewhere)  # after the checks, before the writing
         return rendered(d)
 
-    monkeypatch.setattr(diagnose_report, "report_files", render_then_lose_the_directory)
+    monkeypatch.setattr(diagnose_report, "_report_files", render_then_lose_the_directory)
     report = tmp_path / "rep"
     assert main(["diagnose", RC, recording, *DIAGNOSE, "--report", str(report), "--json", str(elsewhere / "d.json")]) == 2
     assert "cannot write" in _one_line_error(capsys)

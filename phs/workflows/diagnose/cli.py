@@ -86,9 +86,9 @@ def run_diagnose(args: argparse.Namespace) -> int:
     text = d.summary()
     files: dict[str, str | bytes] = {}  # every output of --report, --json and --discover-out: all written, or none
     if args.report is not None:
-        from phs.workflows.diagnose.report import report_files
+        from phs.workflows.diagnose.report import _report_files
 
-        files.update({os.path.join(args.report, n): data for n, data in report_files(d).items()})
+        files.update({os.path.join(args.report, n): data for n, data in _report_files(d).items()})
     if args.json is not None:
         from phs.workflows.diagnose.report import to_json
 

@@ -221,7 +221,7 @@ def write_figures(d, directory, prefix: str) -> list[str]:
     return paths
 
 
-def report_files(d) -> dict:
+def _report_files(d) -> dict:
     """The files of the report, rendered in memory: ``{name: text or PNG bytes}`` for ``index.html``
     (figures embedded), ``fits.png``, ``hypotheses.png``, ``locate.png`` (when something was located),
     ``diagnosis.json`` and ``summary.txt``."""
@@ -270,7 +270,7 @@ def report_files(d) -> dict:
 
 
 def write_report(d, directory) -> None:
-    """Write :func:`report_files` into ``directory`` all or nothing (:func:`phs.io.write_all_atomic`;
+    """Write :func:`_report_files` into ``directory`` all or nothing (:func:`phs.io.write_all_atomic`;
     the directory is created if missing, and removed again when the writing fails)."""
     directory = os.fspath(directory)
-    write_all_atomic({os.path.join(directory, n): data for n, data in report_files(d).items()}, create=[directory])
+    write_all_atomic({os.path.join(directory, n): data for n, data in _report_files(d).items()}, create=[directory])
