@@ -16,13 +16,13 @@ import tempfile
 import casadi as ca
 
 from phs.errors import InputDataError
-from phs.io import write_atomic
+from phs.io import write_all_atomic
 
 
 def write_c_sources(functions, directory, base: str, head: str) -> list[str]:
     """Generate ``base.c`` and ``base.h`` defining ``functions`` (CasADi), each starting with the
-    comment ``head``, and write them into ``directory`` atomically (created if missing; its parent
-    must exist).  Returns the paths written (``.c`` then ``.h``).
+    comment ``head``, and write them into ``directory``, both or neither (:func:`phs.io.write_all_atomic`;
+    the directory is created if missing, its parent must exist).  Returns the paths written (``.c`` then ``.h``).
 
     Raises
     ------
@@ -56,9 +56,7 @@ def write_c_sources(functions, directory, base: str, head: str) -> list[str]:
         for ext in (".c", ".h"):
             with open(os.path.join(tmp, base + ext), encoding="utf-8") as fh:
                 files.append((os.path.join(directory, base + ext), head + fh.read()))
-    os.makedirs(directory, exist_ok=True)
-    for path, text in files:
-        write_atomic(path, text)
+    write_all_atomic(dict(files), create=[directory])  # both or neither (the directory removed again on failure)
     return [p for p, _ in files]
 
 

@@ -246,3 +246,14 @@ def test_write_all_atomic_refuses_a_directory_before_any_rename(tmp_path):
     with pytest.raises(InputDataError, match="it is a directory"):
         write_all_atomic({report / "a.txt": "A", report: "a file where the report's directory is"}, create=[report])
     assert not report.exists() and _files(tmp_path) == []
+
+
+def test_export_writes_both_sources_or_neither(tmp_path, capsys):
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "rc_model.h").mkdir()  # the header's destination is a directory: refused before any rename
+    assert main(["export", RC, "--c", str(out)]) == 2
+    assert "it is a directory" in _one_line_error(capsys)
+    assert _files(tmp_path) == []  # no rc_model.c beside it, no temporary
+    assert main(["export", RC, "--c", str(tmp_path / "new")]) == 0
+    assert sorted(os.listdir(tmp_path / "new")) == ["rc_model.c", "rc_model.h"]
