@@ -13,8 +13,8 @@ coefficients of the two fits have no printed symbols; they are named
 ``A_m{i}, c_m{i}, s_m{i}`` (amplitude, centre, width of Gaussian i of eq. 8) and
 ``a_v{i}, f_v{i}, c_v{i}, s_v{i}`` (voltage slope, offset, centre, width of eq. 10).
 
-Equations as implemented (single actuator, :func:`msd_hasel`), with ``X = 1000 x``
-the displacement in mm (``X = 100 x`` in cm with ``fit_length="cm"``) and
+Equations as implemented (single actuator, :func:`msd_hasel`), with ``X = 100 x``
+the displacement in cm (``X = 1000 x`` in mm with ``fit_length="mm"``) and
 ``U = V / 1000`` the voltage in kV (the units of the printed fits; forces in N)::
 
     l_material(x) = sum_i A_m{i} exp(-((X - c_m{i}) / s_m{i})**2)            (eq. 8)
@@ -37,9 +37,10 @@ storage; the paper neglects the electrical dynamics, Fig. 7).  Energy balance:
 Deviations and choices (each discussed in ``docs/systems/msd_hasel.md``):
 
 * Units: eqs. 8 and 10 take V in kV and give N; the unit of x is not printed and is an
-  option, ``fit_length="mm"`` (default) or ``"cm"``.  States and inputs are SI (``x``
-  in m, ``p`` in kg*m/s, ``V`` in volts); the expressions convert with ``X = 1000 x``
-  (``100 x`` in cm) and ``U = V/1000``.  The fit coefficients keep the printed values in
+  option, ``fit_length="cm"`` (default, chosen by the scale of the platform's motion and
+  Fig. 7's rise) or ``"mm"`` (the literal reading of the paper's other lengths).  States and
+  inputs are SI (``x`` in m, ``p`` in kg*m/s, ``V`` in volts); the expressions convert with
+  ``X = 100 x`` (``1000 x`` in mm) and ``U = V/1000``.  The fit coefficients keep the printed values in
   the printed units (``N/kV``, ``N``, and ``fit_length`` for the centres and widths).
 * Eq. 10 prints ``e^{+((x-0.11)/0.11)^2}`` and ``e^{+((x-2.5)/0.2)^2}``: the minus
   signs of the Gaussians are restored (the surface of Fig. 6 is bounded).  The third
@@ -53,21 +54,25 @@ Deviations and choices (each discussed in ``docs/systems/msd_hasel.md``):
   so a load is part of the model: the default mass ``m = 0.05 kg`` is the share of
   the reference platform's two 75 g plates carried by one bottom-stage actuator (the
   paper gives neither the actuator's nor the platform's mass) and weighs 0.49 N.
-  With it the static displacement grows monotonically from 0.029 mm at 0 kV to
-  0.90 mm at 5 kV, with a single equilibrium up to 6 kV (steepest near 0.25 kV);
+  With it the static displacement grows monotonically from 0.29 mm at 0 kV to
+  9.0 mm at 5 kV (fits read in cm; a tenth of that in mm), with a single equilibrium
+  up to 6 kV (steepest near 0.25 kV);
   loads above about 0.65 N make the quasi-static curve fold (two stable
   equilibria, snap-through) between 0.4 and 1 kV.
-* Validity: the input map ``beta(x)`` changes sign at x = 1.785 mm (beyond it the
-  fit says the voltage pulls the actuator closed: the third Gaussian, centred at
-  2.5 mm, acts as a stroke limit); the condition ``beta(x) >= 0`` is checked at run
-  time, as is ``X >= c_m1`` (the centre of the compression wall, -0.69 mm, beyond
-  which the fitted force decreases again).
-* Damping: with the printed ``b = 1 kg/s`` (tuned by the authors for simulation
-  speed) and the 50 g load the actuator is underdamped (damping ratio 0.02-0.06,
-  25-85 Hz), unlike the first-order rise of Fig. 7; a voltage step of more than
-  about 2 kV from rest overshoots past x = 1.785 mm and the simulation stops with
-  a :class:`phs.DomainError`.  Staircases of 1 kV steps stay inside, as does a
-  5 kV step with ``b = 10 kg/s``.
+* Validity: the input map ``beta(x)`` changes sign at x = 1.785 fit units (17.85 mm in
+  cm; beyond it the fit says the voltage pulls the actuator closed: the third Gaussian,
+  centred at 2.5 units, acts as a stroke limit); the condition ``beta(x) >= 0`` is checked
+  at run time, as is ``X >= c_m1`` (the centre of the compression wall, -0.69 units,
+  beyond which the fitted force decreases again).
+* Damping: ``b = 1 kg/s`` as printed (tuned by the authors for simulation speed).  With
+  the 50 g load the actuator is underdamped (damping ratio 0.06-0.2 in cm, 0.02-0.06 in
+  mm); a voltage step of more than about 3 kV (2 kV in mm) from rest overshoots past the
+  input map's zero and the simulation stops with a :class:`phs.DomainError`; 1 kV
+  staircases stay inside, as does a 5 kV step with ``b = 10 kg/s``.  Fig. 7's unloaded
+  first-order rise (about 17 ms): with the printed b and the few grams of an unloaded
+  actuator (``m = 0.002``) the cm reading rises without overshoot, in 54 to 7.6 ms
+  (10-90 %) from 1 to 5 kV; in mm no mass gives a first-order rise slower than a few
+  milliseconds (docs, "Damping and Fig. 7").
 * ``tau``: eq. 4's ``tau theta`` is a Hookean torsional spring on the angular
   displacement ``theta`` of the actuator from rest.  A single actuator loaded along
   its axis does not rotate, so ``theta = 0`` and the term vanishes here; it acts in
@@ -82,9 +87,10 @@ Deviations and choices (each discussed in ``docs/systems/msd_hasel.md``):
 * Scale of motion: with x in mm, one actuator's 0 -> 5 kV stroke is at most 0.97 mm for
   any load up to 4.4 N, and the platform's end effector rises by 1.788 mm with all six
   actuators at 5 kV (at most 1.94 mm anywhere in the box of strokes for the chosen
-  geometry), well below the scale implied by the paper's 6.24 mm tracking error.
-  ``fit_length="cm"`` scales every static displacement by exactly 10 (17.88 mm heave);
-  nothing in the paper's text settles the unit (section "Scale of motion" of the docs).
+  geometry), below the paper's 6.24 mm tracking error itself; in cm (the default) every
+  static displacement is exactly 10 times larger (17.88 mm heave).  Fig. 7's first-order rise
+  (about 17 ms, no load) is reachable with the printed b = 1 kg/s only in cm (section
+  "Scale of motion" and "Damping" of the docs); the paper never prints the unit.
 
 The platform (:func:`hasel_platform`) is described in its docstring.
 """
@@ -123,7 +129,7 @@ from phs import (
 from phs.errors import ModelError
 
 MM_PER_M = sp.Integer(1000)
-"""Conversion of the state x [m] to the printed fits' displacement X = 1000 x [mm] (the default reading)."""
+"""Conversion of the state x [m] to millimetres (the unit of the state ranges and scales)."""
 FIT_LENGTHS = {"mm": 1000, "cm": 100}
 """Readings of the unit of x in the printed fits (eqs. 8 and 10), each with its number of units per metre."""
 KV_PER_V = sp.Rational(1, 1000)
@@ -141,7 +147,7 @@ def _check_fit_length(fit_length, who: str) -> str:
     return fit_length
 
 
-def default_parameters(fit_length: str = "mm") -> dict[str, Param]:
+def default_parameters(fit_length: str = "cm") -> dict[str, Param]:
     """The MSD HASEL's parameters: eqs. 8, 10-12 of the paper and the documented choices.
 
     Fit coefficients keep the printed values in the printed units (kV, N and the
@@ -151,10 +157,10 @@ def default_parameters(fit_length: str = "mm") -> dict[str, Param]:
 
     Parameters
     ----------
-    fit_length : {"mm", "cm"}
+    fit_length : {"cm", "mm"}
         The unit in which the printed fits read x (the paper does not print it; see
-        "Scale of motion" in ``docs/systems/msd_hasel.md``).  ``"cm"`` gives the same
-        force laws at ten times the displacements.
+        "Scale of motion" in ``docs/systems/msd_hasel.md``).  ``"mm"`` gives the same
+        force laws at a tenth of the displacements.
 
     Returns
     -------
@@ -170,9 +176,10 @@ def default_parameters(fit_length: str = "mm") -> dict[str, Param]:
     >>> P = default_parameters()
     >>> P["A_m1"].value, P["A_m1"].unit, P["b"].value
     (2020000000.0, 'N', 1.0)
-    >>> P = default_parameters("cm")
     >>> P["c_m1"].value, P["c_m1"].unit
     (-0.69, 'cm')
+    >>> default_parameters("mm")["c_m1"].unit
+    'mm'
     """
     unit = _check_fit_length(fit_length, "default_parameters")
     P = []
@@ -189,7 +196,7 @@ def default_parameters(fit_length: str = "mm") -> dict[str, Param]:
               Param(f"s_v{i}", s, unit, f"width of Gaussian {i} of the voltage force (eq. 10)")]
     P += [
         Param("m", 0.05, "kg", "moving mass of one actuator: its share of the platform (2 plates / 3 actuators)",
-              (0.005, 0.5)),
+              (0.0002, 0.5)),
         Param("b", 1.0, "kg/s", "damping coefficient (eq. 11)", (0.1, 10.0)),
         Param("tau", 1.0, "N*m/rad", "torsional restoring constant of one actuator per tilt axis "
                                      "(eq. 12, printed kg*m/s**2)", (0.1, 10.0)),
@@ -339,15 +346,15 @@ def _parameters(overrides: dict, who: str, used, fit_length) -> dict[str, Param]
 
 
 def _suffix(fit_length: str) -> str:
-    """Model name suffix: none for the default reading (names unchanged), ``_cm`` otherwise."""
-    return "" if fit_length == "mm" else f"_{fit_length}"
+    """Model name suffix: none for the default reading (cm), ``_mm`` for the other."""
+    return "" if fit_length == "cm" else f"_{fit_length}"
 
 
 def _reading(fit_length: str) -> str:
-    return "" if fit_length == "mm" else f", fits read with x in {fit_length}"
+    return "" if fit_length == "cm" else f", fits read with x in {fit_length}"
 
 
-def msd_hasel(*, load: bool = True, fit_length: str = "mm", **overrides: float) -> PHSystem:
+def msd_hasel(*, load: bool = True, fit_length: str = "cm", **overrides: float) -> PHSystem:
     """One expanding folded HASEL carrying a mass: the nonlinear mass-spring-damper of eqs. 3-12.
 
     States ``x`` (displacement from rest, m, positive = extension) and ``p``
@@ -360,13 +367,13 @@ def msd_hasel(*, load: bool = True, fit_length: str = "mm", **overrides: float) 
     ----------
     load : bool
         Include the weight ``m g`` of the carried mass (the documented preload).
-    fit_length : {"mm", "cm"}
+    fit_length : {"cm", "mm"}
         Unit in which the printed fits (eqs. 8 and 10) read x, which the paper does not
-        print.  ``"mm"`` (default) gives strokes under 1 mm; ``"cm"`` the same force laws
-        at exactly ten times the displacements (the scale of the paper's platform; see
+        print.  ``"cm"`` (default) gives strokes up to about 1 cm, the scale of the paper's
+        platform; ``"mm"`` the same force laws at exactly a tenth of the displacements (see
         "Scale of motion" in ``docs/systems/msd_hasel.md``).  The centres and widths
         carry this unit, so overrides of them are read in it.  The model is named
-        ``msd_hasel`` in mm and ``msd_hasel_cm`` in cm.
+        ``msd_hasel`` in cm and ``msd_hasel_mm`` in mm.
     **overrides : float
         Parameter values by name (``b=2.0``, ``m=0.03``); see :func:`default_parameters`.
         They replace the defaults of the chosen ``fit_length``.
@@ -388,11 +395,11 @@ def msd_hasel(*, load: bool = True, fit_length: str = "mm", **overrides: float) 
     >>> s.state_names, s.input_names, s.measured_names
     (['x', 'p'], ['V', 'F_load'], ['displacement', 'force_material', 'force_voltage'])
     >>> from phs import equilibrium
-    >>> round(equilibrium(s, u={"V": 5000.0}, x0={"x": 0.5e-3})["x"] * 1e3, 3)   # mm under 0.49 N at 5 kV
-    0.902
-    >>> s = msd_hasel(fit_length="cm")
-    >>> round(equilibrium(s, u={"V": 5000.0}, x0={"x": 5e-3})["x"] * 1e3, 3)     # the same force laws read in cm
+    >>> round(equilibrium(s, u={"V": 5000.0}, x0={"x": 5e-3})["x"] * 1e3, 3)     # mm under 0.49 N at 5 kV
     9.016
+    >>> s = msd_hasel(fit_length="mm")
+    >>> round(equilibrium(s, u={"V": 5000.0}, x0={"x": 0.5e-3})["x"] * 1e3, 3)   # the same force laws read in mm
+    0.902
     """
     P = _parameters(overrides, "msd_hasel", _FIT + ["m", "b"] + (["g"] if load else []), fit_length)
     x = symbol_of_state("x")
@@ -438,7 +445,7 @@ def _relative_angular_velocity(u, w, ud, wd):
     return sp.Matrix([(ud * C2 + u * w * wd) / (C2 * S), wd * S / C2, -u * wd / C2])
 
 
-def hasel_platform(stages: int = 2, *, fit_length: str = "mm", **overrides: float) -> PHSystem:
+def hasel_platform(stages: int = 2, *, fit_length: str = "cm", **overrides: float) -> PHSystem:
     """Stacked plates carried by three MSD HASELs per stage: the paper's two-stage platform (Fig. 8).
 
     Each stage is a rigid plate (a uniform disc of mass ``m_p`` and radius ``r_p``)
@@ -485,9 +492,9 @@ def hasel_platform(stages: int = 2, *, fit_length: str = "mm", **overrides: floa
     ----------
     stages : int
         Number of stacked stages (2 for the paper's platform).
-    fit_length : {"mm", "cm"}
-        Unit in which the printed fits read x, as in :func:`msd_hasel` (``"cm"``: ten
-        times the actuator strokes; the model is then named ``hasel_platform{stages}_cm``).
+    fit_length : {"cm", "mm"}
+        Unit in which the printed fits read x, as in :func:`msd_hasel` (``"mm"``: a tenth
+        of the actuator strokes; the model is then named ``hasel_platform{stages}_mm``).
     **overrides : float
         Parameter values by name (see :func:`default_parameters`); they replace the
         defaults of the chosen ``fit_length``.

@@ -39,7 +39,7 @@ def save(fig, name):
     print("wrote", path)
 
 
-system = msd_hasel()
+system = msd_hasel(fit_length="mm")  # the fits read in mm (the figures of docs/workflows/sweep.md)
 T_STEP = 0.05  # the voltage step comes after 50 ms at rest
 t = np.linspace(0.0, 0.3 if QUICK else 0.6, 301 if QUICK else 1201)
 

@@ -47,7 +47,7 @@ def hasel_ctrl(hasel):
 
 @pytest.fixture(scope="module")
 def msd():
-    return msd_hasel()
+    return msd_hasel(fit_length="mm")  # the numbers of docs/workflows/idapbc.md
 
 
 @pytest.fixture(scope="module")

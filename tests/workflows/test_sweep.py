@@ -57,7 +57,7 @@ X0 = {"x": 2.9e-5}  # near the 0 kV equilibrium under the default load
 def msd_hasel_system():
     from systems.msd_hasel import msd_hasel
 
-    return msd_hasel()
+    return msd_hasel(fit_length="mm")
 
 
 def overshoot(res) -> float:
