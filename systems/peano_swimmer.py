@@ -52,7 +52,10 @@ choice is discussed in ``docs/systems/peano_swimmer.md``):
   activation (zero when unactuated), the simplest passive form of "less force at higher
   velocity" that the authors name as missing;
 * the fluid is reduced to added mass, quadratic drag and Lighthill's reactive thrust of a
-  rigid pitching fin, without recoil (the head does not heave or yaw).
+  rigid pitching fin, without recoil (the head does not heave or yaw);
+* ``law="eq12"`` drives the pair by the alpha-parametric eqs. 1-2 instead of eq. 3, with
+  coefficients ``a1, a2, a3`` fitted to eq. 3 (the paper prints none; within 16.5 % of eq. 3
+  over 0.25-4 % strain, see :class:`components.PeanoHasel`).
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ from components import (
     VoltageSource,
     geometric_symbol,
 )
+from components.peano import EQ12, LAWS, eq12_angle, eq12_force
 from phs import Measured, Param, PHSystem, interconnect, series, symbol_of_state
 from phs.errors import ModelError
 from phs.signals import Signal, square
@@ -97,6 +101,9 @@ def default_parameters() -> dict[str, Param]:
         Param("b2", 21.71, "N", "eq. 3: hyperbolic coefficient"),
         Param("b3", 0.22, "1", "eq. 3: pole offset (percent strain)"),
         Param("b4", 0.39, "1", "eq. 3: offset of the hyperbola"),
+        Param("a1", EQ12["a1"], "N", "eqs. 1-2: force scale (law='eq12'; fitted to eq. 3, not printed)"),
+        Param("a2", EQ12["a2"], "1", "eqs. 1-2: length ratio, flat pouch at strain 1 - a2 (law='eq12'; fitted)"),
+        Param("a3", EQ12["a3"], "1", "eqs. 1-2: pouch geometry 2 sqrt(A)/L (law='eq12'; fitted to eq. 3)"),
         Param("V_ref", 6000.0, "V", "voltage at which eq. 3 holds (chosen; not printed)", (1000.0, 10000.0)),
         Param("L0", 0.05, "m", "flat length of each Peano-HASEL (chosen)", (0.01, 0.2)),
         Param("C0", 1.5e-9, "F", "capacitance of an actuator at zero strain (chosen)", (1e-11, 1e-8)),
@@ -146,11 +153,14 @@ def swimmer_drive(amplitude: float, frequency: float) -> dict[str, Signal]:
             "V_R": square(amplitude, frequency, bipolar=False, start=0.5 / frequency)}
 
 
-def peano_swimmer(**overrides: float) -> PHSystem:
+def peano_swimmer(*, law: str = "eq3", **overrides: float) -> PHSystem:
     """The Peano-HASEL swimmer: an antagonistic pair bending a fin that propels a head (see module docstring).
 
     Parameters
     ----------
+    law : {"eq3", "eq12"}
+        The actuators' force-strain law: eq. 3 (default) or the alpha-parametric eqs. 1-2
+        (:class:`components.PeanoHasel`; the model is then named ``peano_swimmer_eq12``).
     **overrides : float
         Parameter values by name (see :func:`default_parameters`).
 
@@ -165,7 +175,7 @@ def peano_swimmer(**overrides: float) -> PHSystem:
     Raises
     ------
     ModelError
-        If an override names an unknown parameter.
+        If an override names an unknown parameter, or ``law`` is not ``"eq3"`` or ``"eq12"``.
 
     Examples
     --------
@@ -173,6 +183,8 @@ def peano_swimmer(**overrides: float) -> PHSystem:
     >>> s.state_names, s.input_names
     (['left.Q', 'right.Q', 'phi', 'tail.p', 'body.p'], ['V_L', 'V_R'])
     """
+    if law not in LAWS:
+        raise ModelError(f"peano_swimmer: law must be 'eq3' or 'eq12', got {law!r}")
     P = default_parameters()
     unknown = sorted(set(overrides) - set(P))
     if unknown:
@@ -188,10 +200,11 @@ def peano_swimmer(**overrides: float) -> PHSystem:
     absU = sp.sqrt(U**2 + S["v0"] ** 2)
     absw = sp.sqrt(omega**2 + S["w0"] ** 2)
     k_T = m_a * S["L_t"] ** 2 / 2
-    act = {k: P[k] for k in ("L0", "V_ref", "C0", "k_f", "d0", "b1", "b2", "b3", "b4")}
+    coefficients = {"eq3": ("b1", "b2", "b3", "b4"), "eq12": ("a1", "a2", "a3")}
+    act = {k: P[k] for k in ("L0", "V_ref", "C0", "k_f", "d0") + coefficients[law]}
     arm = S["r"] * phi / S["L0"]
-    pair = {"left": PeanoHasel("left", strain=S["s_n"] + arm, **act),
-            "right": PeanoHasel("right", strain=S["s_n"] - arm, **act)}
+    pair = {"left": PeanoHasel("left", strain=S["s_n"] + arm, law=law, **act),
+            "right": PeanoHasel("right", strain=S["s_n"] - arm, law=law, **act)}
     shared = pair["left"].symbols()[0]
     volts = {k: symbol_of_state(f"{k}.Q") / a.capacitance(shared) for k, a in pair.items()}
     activation = sum((symbol_of_state(f"{k}.Q") / S["Q_ref"]) ** 2 for k in pair)
@@ -218,16 +231,22 @@ def peano_swimmer(**overrides: float) -> PHSystem:
              series("tail", "spine", "spine_damping", "actuator_velocity", "fin_drag", "thrust.a"),
              series("body", "head_drag", "thrust.b")]
     e_L, e_R = 100 * (S["s_n"] + arm), 100 * (S["s_n"] - arm)
-    force = {k: (volts[k] / S["V_ref"]) ** 2 * (S["b1"] * e + S["b2"] * (1 / (e + S["b3"]) - S["b4"]))
-             for k, e in (("left", e_L), ("right", e_R))}
+    if law == "eq3":
+        law_force = {k: S["b1"] * e + S["b2"] * (1 / (e + S["b3"]) - S["b4"]) for k, e in (("left", e_L), ("right", e_R))}
+    else:  # eq. 1 at the angle of eq. 2, zero beyond the end of the stroke (alpha = pi/2)
+        law_force = {k: sp.Piecewise((eq12_force(eq12_angle(e / 100, S["a2"], S["a3"]), S["a1"]),
+                                      eq12_angle(e / 100, S["a2"], S["a3"]) <= sp.pi / 2), (0, True))
+                     for k, e in (("left", e_L), ("right", e_R))}
+    force = {k: (volts[k] / S["V_ref"]) ** 2 * law_force[k] for k in pair}
     measured = [Measured("U", U, "m/s", "forward speed of the swimmer"),
                 Measured("tip", S["L_t"] * sp.sin(phi), "m", "lateral displacement of the fin's trailing edge"),
                 Measured("strain_L", e_L, "1", "contraction strain of the left actuator [%]"),
                 Measured("strain_R", e_R, "1", "contraction strain of the right actuator [%]"),
-                Measured("force_L", force["left"], "N", "contraction force of the left actuator, eq. 3 x (V/V_ref)**2"),
-                Measured("force_R", force["right"], "N", "contraction force of the right actuator, eq. 3 x (V/V_ref)**2"),
+                Measured("force_L", force["left"], "N", f"contraction force of the left actuator, {law} x (V/V_ref)**2"),
+                Measured("force_R", force["right"], "N", f"contraction force of the right actuator, {law} x (V/V_ref)**2"),
                 Measured("thrust", k_T * omega**2, "N", "reactive thrust of the fin")]
-    used = [p for k, p in P.items() if k not in act and k != "R_s" and k != "K_s" and k != "b_s"]
-    return interconnect("peano_swimmer", comps, conns, params=used, measured=measured,
+    laws = coefficients["eq3"] + coefficients["eq12"]
+    used = [p for k, p in P.items() if k not in act and k not in laws and k not in ("R_s", "K_s", "b_s")]
+    return interconnect("peano_swimmer" + ("" if law == "eq3" else "_eq12"), comps, conns, params=used, measured=measured,
                         description="rigid-soft swimmer driven by an antagonistic Peano-HASEL pair "
                                     "(Michelis, Gravert, Katzschmann, eq. 3), reduced hydrodynamics")
