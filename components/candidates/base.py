@@ -197,6 +197,38 @@ class Augmentation:
         return out
 
 
+def command_channels(system) -> list[str]:
+    """The measured channels of ``system`` that are a controller's computed command (``Measured.command``).
+
+    Examples
+    --------
+    >>> from systems.examples import pd_servo
+    >>> servo = pd_servo()
+    >>> command_channels(servo)
+    ['u_c']
+    """
+    return [m.name for m in system.measured if m.command]
+
+
+def controller_inputs(system) -> list[str]:
+    """The inputs a controller's computed command (:func:`command_channels`) is computed from: its reference
+    and any signal added to its output.  They are signals inside the controller, not drives: an element
+    between a command and the plant sits at the command.
+
+    Examples
+    --------
+    >>> from systems.examples import pd_servo
+    >>> controller_inputs(pd_servo())
+    ['r']
+    """
+    symbols = set()
+    for m in system.measured:
+        if m.command:
+            symbols |= {s.name for s in getattr(m.expr, "free_symbols", ())}
+    return [n for n in system.input_names if n in symbols]
+
+
+
 class Candidate(ABC):
     """One kind of physics a model may lack.  Subclasses set ``effect`` (its name), ``summary``
     (a phrase for explanations), ``kind`` (``structure``, ``input`` or ``measured``) and implement
@@ -213,6 +245,30 @@ class Candidate(ABC):
     @abstractmethod
     def augment(self, system, where: str, scales: Scales) -> Augmentation:
         """The system with this candidate attached at ``where``."""
+
+    def places(self, system, signals) -> list[str]:
+        """Where the candidate is tried, given the recorded ``signals`` (a mapping of name to samples): its
+        attach points, less the model inputs a recorded controller command is computed from (its reference,
+        a signal added to its output: :func:`~components.candidates.elements.controller_inputs`).  Those are
+        signals inside the controller, not ports through which power enters the plant: an electrical or
+        mechanical element at them models nothing that exists.  Input elements (drive physics) refine this
+        (:meth:`components.candidates.elements.InputElement.places`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from components.candidates import SeriesResistance
+        >>> from systems.examples import pd_servo
+        >>> servo = pd_servo()
+        >>> t = np.linspace(0.0, 1.0, 5)
+        >>> SeriesResistance().places(servo, {"r": t, "u_c": np.sin(t)})   # the reference is inside the loop
+        []
+        >>> SeriesResistance().places(servo, {"r": t})                     # no command recorded
+        ['r']
+        """
+        recorded = any(c in signals and np.ptp(np.asarray(signals[c], float)) > 0 for c in command_channels(system))
+        inside = set(controller_inputs(system)) if recorded else set()
+        return [w for w in self.attach_points(system) if w not in inside]
 
     def _check_where(self, system, where: str) -> None:
         points = self.attach_points(system)

@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import sympy as sp
 
-from components.candidates.base import Augmentation, Candidate, _rebuild, momentum_states
+from components.candidates.base import Augmentation, Candidate, _rebuild, command_channels, controller_inputs, momentum_states
 from phs.errors import ModelError
 from phs.params import InputInfo
 
@@ -58,37 +58,6 @@ def input_members(where: str) -> list[str]:
     (['V4', 'V9', 'V15'], ['U'])
     """
     return where.split(INPUT_GROUP)
-
-
-def command_channels(system) -> list[str]:
-    """The measured channels of ``system`` that are a controller's computed command (``Measured.command``).
-
-    Examples
-    --------
-    >>> from systems.examples import pd_servo
-    >>> servo = pd_servo()
-    >>> command_channels(servo)
-    ['u_c']
-    """
-    return [m.name for m in system.measured if m.command]
-
-
-def controller_inputs(system) -> list[str]:
-    """The inputs a controller's computed command (:func:`command_channels`) is computed from: its reference
-    and any signal added to its output.  They are signals inside the controller, not drives: an element
-    between a command and the plant sits at the command.
-
-    Examples
-    --------
-    >>> from systems.examples import pd_servo
-    >>> controller_inputs(pd_servo())
-    ['r']
-    """
-    symbols = set()
-    for m in system.measured:
-        if m.command:
-            symbols |= {s.name for s in getattr(m.expr, "free_symbols", ())}
-    return [n for n in system.input_names if n in symbols]
 
 
 def deviation_input(channel: str, effect: str) -> str:

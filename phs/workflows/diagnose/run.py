@@ -165,16 +165,27 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         scales = Scales.of(current.system.with_params(current.values), res.t, X, U,
                            {ch: data.recording[ch] for ch in outs})
         augs = []
+        earlier = {(h.augmentation.effect, h.augmentation.attached_to): h for r in rounds for h in r  # a refit's values over a screening's
+                   if h.ok and h.element_values and h.stage != "full"}
+        earlier.update({(h.augmentation.effect, h.augmentation.attached_to): h for r in rounds for h in r
+                        if h.ok and h.element_values and h.stage == "full"})
         for c in pool:
-            # an input element goes where the command varies, inputs driven together as one place
-            places = (c.places(current.system, data.recording.signals)
-                      if c.kind == "input" else c.attach_points(current.system))
+            # where the recording drives it: an input element where the command varies (inputs driven together as
+            # one place), nothing at a signal inside a recorded controller (Candidate.places)
+            places = (c.places(current.system, data.recording.signals) if hasattr(c, "places")
+                      else c.attach_points(current.system))
             for w in places:
                 if any(a.augmentation.effect == c.effect and a.augmentation.attached_to == w for a in accepted):
                     continue
                 try:
                     aug = c.augment(current.system.with_params(current.values), w, scales)
-                    augs.append(aug if aug.summary else replace(aug, summary=c.summary))
+                    aug = aug if aug.summary else replace(aug, summary=c.summary)
+                    fitted = earlier.get((aug.effect, w))
+                    if aug.element is not None and not aug.starts and fitted is not None:
+                        # an input element fitted in an earlier round is searched around its values there first
+                        # (the whole grid when they no longer hold): the model it extends changed by one effect
+                        aug = replace(aug, starts=(dict(fitted.element_values),))
+                    augs.append(aug)
                 except Exception as exc:  # a user candidate that cannot attach here is skipped, and said so
                     if progress:
                         print(f"  {c.effect}@{w}: cannot attach ({exc})", file=sys.stderr)
