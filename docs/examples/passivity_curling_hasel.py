@@ -31,7 +31,7 @@ SIZE = {"samples": 400, "starts": 3} if QUICK else {"samples": 2000, "starts": 8
 # %% 1. The 4-segment curling HASEL over its declared ranges, with a 5 kV / 2 Hz square-wave run and the
 # local test at rest
 N = 4
-hasel = curling_hasel(N)
+hasel = curling_hasel(N, network="printed")  # Table 4 as printed: the numbers of docs/workflows/passivity.md
 X0 = {f"seg{i}.l_p": 0.015 for i in range(1, N + 1)}
 T = 0.5 if QUICK else 4.0
 t = np.linspace(0.0, T, int(T * 1000) + 1)

@@ -51,7 +51,7 @@ PAPER = {  # Table 5: fitness at +10, +5, 0, -5, -10 % and the SD
 NOISE = 0.001  # section 4: sensor accuracy +-0.1 % of full scale, read as Gaussian noise of 0.1 % of the tip's range
 X0 = {f"seg{i}.l_p": 0.015 for i in range(1, N + 1)}
 EVERY, START, DURATION = (0.5, 0.5, 3.0) if args.quick else (2.0, 2.0, 12.0)
-truth = curling_hasel(N)
+truth = curling_hasel(N, network="printed")  # Table 4 as printed: the table of docs/systems/curling_hasel.md
 G2 = truth.param("gamma2").value
 
 
