@@ -217,7 +217,7 @@ def _reference(model: _Model, box: _Box, p_own: np.ndarray) -> tuple[_Scale, _Sc
         if not stack or not idx:
             return Q, 0
         S = np.concatenate([M[np.ix_(idx, idx)] for M in stack])
-        _, sv, Vt = np.linalg.svd(S)
+        _, sv, Vt = np.linalg.svd(S, full_matrices=False)  # the left factor of a tall stack is never used
         r = int(np.sum(sv > 1e-9 * sv[0])) if sv.size and sv[0] > 0 else 0
         return Q @ Vt[:r].T, len(idx) - r
 
