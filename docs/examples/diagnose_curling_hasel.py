@@ -3,7 +3,7 @@
 # story, where the drift after each voltage step had to be explained by adding an RC branch by hand.
 # Run: python docs/examples/diagnose_curling_hasel.py [--quick] [--out DIR]
 # Writes docs/figures/diagnose_curling_hasel_{fits,locate,hypotheses}.png (or into --out DIR) and prints
-# the numbers quoted in docs/workflows/diagnose.md.
+# the numbers quoted in docs/studies/diagnosis.md.
 
 # %%
 import argparse

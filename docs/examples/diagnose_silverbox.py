@@ -37,7 +37,7 @@ FS = 1e7 / 2**14  # sampling frequency [Hz] (README of the data set)
 FORCE_PER_VOLT = 1e5  # N/V: the input voltage V1 read as a force (a choice of units, as in identify_silverbox.py)
 
 # %% The data: V1 (input), V2 (output, the "displacement"); offsets removed.  A window of the arrow's end
-# (filtered noise of large amplitude, where the linear model fails, docs/workflows/identify.md), starting
+# (filtered noise of large amplitude, where the linear model fails, docs/studies/identification.md), starting
 # where the signal is still small so the model's rest state is a fair initial state
 raw = np.genfromtxt(DATA, delimiter=",", skip_header=1, usecols=(0, 1))
 v1, v2 = raw[:, 0] - raw[:, 0].mean(), raw[:, 1] - raw[:, 1].mean()

@@ -3,7 +3,7 @@
 # +-5/+-10 % sensitivity table compared with Table 5 of the curling HASEL paper.
 # Run: python docs/examples/identify_curling_hasel.py [--quick] [--out DIR]
 # Writes docs/figures/identify_curling_hasel.png (or into --out DIR) and prints the tables of
-# docs/workflows/identify.md.
+# docs/studies/identification.md.
 
 # %%
 import argparse
@@ -32,7 +32,7 @@ N = 4
 FREE = ["K_b", "b", "gamma1", "gamma2", "C1", "R2"]
 PAPER_SD = {"gamma1": 6.7834, "gamma2": 1.5172, "K_b": 1.0908, "R2": 0.4219, "C1": 0.2539, "b": 0.0370}  # Table 5
 X0 = {f"seg{i}.l_p": 0.015 for i in range(1, N + 1)}
-truth = curling_hasel(N, network="printed")  # Table 4 as printed: the numbers of docs/workflows/identify.md
+truth = curling_hasel(N, network="printed")  # Table 4 as printed: the numbers of docs/studies/identification.md
 rng = np.random.default_rng(7)
 
 
@@ -46,7 +46,7 @@ def experiment(drive, duration, name):
 
 
 # %% Training: a staircase down to -5 kV in 1 kV steps every 2 s; validation: a -4 kV / 0 square wave at 1 Hz
-# (both start with a step at t = 0: see the note on quiet starts in docs/workflows/identify.md)
+# (both start with a step at t = 0)
 duration = 2.0 if args.quick else 10.0
 train = experiment(staircase(-1000.0, every=2.0, n_steps=5), duration, "staircase")
 valid = experiment(square(-2000.0, 1.0, offset=-2000.0), duration, "square wave")
