@@ -71,6 +71,8 @@ OPTIONS: dict[str, _Option] = {
     "--out": _Option("write the results table to FILE", "FILE"),
     "--plot": _Option("write a PNG figure to FILE", "FILE"),
     "--report": _Option("write a report directory DIR", "DIR"),
+    "--resume": _Option("continue the study in --out", action="store_true", default=False),
+    "--scheduler": _Option("evaluate on the Dask cluster at ADDRESS", "ADDRESS"),
     "--quiet": _Option("no progress output on stderr", action="store_true", default=False),
     "--progress": _Option("show progress bars on stderr even when it is not a terminal (default: only on a terminal)",
                           action="store_true", default=False),
