@@ -252,7 +252,7 @@ def diagnose_trials(system, recordings, *, shared=None, free=None, outputs=None,
     digests = {name: recording_digest(rec) for name, rec in recordings.items()}
     base = {"model_hash": system.model_hash(), "params": {k: float(v) for k, v in system.param_values().items()},
             "free": free, "shared": shared, "outputs": list(outputs) if outputs else None,
-            "effects": [c.effect for c in cands], "max_effects": max_effects, "discover": discover,
+            "effects": sorted(c.effect for c in cands), "max_effects": max_effects, "discover": discover,
             "x0": {k: float(v) for k, v in (x0 or {}).items()} or None, "rtol": rtol,
             "weights": weights if weights is None or isinstance(weights, str) else {k: float(v) for k, v in weights.items()}}
     folder = os.path.join(out, TRIALS_DIR) if out is not None else None
@@ -288,7 +288,9 @@ def diagnose_trials(system, recordings, *, shared=None, free=None, outputs=None,
                "discover": discover, "rtol": rtol, "weights": weights}
     records, todo = {}, []
     for name in recordings:
-        ident = {**base, "trial": name, "data_sha256": digests[name],
+        # the channels a diagnosis fits (outputs=None: every measured output the recording has), as stored
+        channels = recordings[name].in_units_of(system).check_for(system, outputs)[1]
+        ident = {**base, "trial": name, "data_sha256": digests[name], "outputs": list(channels),
                  "shared_values": joint["shared"] if joint else None}
         path = os.path.join(folder, f"{name}.json") if folder is not None else None
         if resume and path is not None and os.path.exists(path):
