@@ -42,7 +42,8 @@ def add_subcommand(sub) -> None:
     p.add_argument("--max-effects", type=_positive("--max-effects", integer=True), default=2, metavar="N",
                    help="accept at most N effects one after the other (default 2)")
     p.add_argument("--jobs", type=_positive("--jobs", integer=True), metavar="N",
-                   help="processes fitting hypotheses in parallel (default: CPUs, at most 4)")
+                   help="processes fitting hypotheses (with several recordings: diagnosing trials) in parallel "
+                        "(default: CPUs, at most 4)")
     p.add_argument("--discover", dest="discover", action="store_true", default=None,
                    help="always look for a passive correction outside the library (default: when the residual stays structured)")
     p.add_argument("--no-discover", dest="discover", action="store_false", help="never look outside the library")

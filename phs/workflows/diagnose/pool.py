@@ -125,6 +125,7 @@ def on_cluster(scheduler) -> Iterator:
         yield None
         return
     client, owned = _connect(scheduler)
+    _by_value()
     token = _CLUSTER.set(client)
     try:
         yield client
@@ -146,3 +147,15 @@ def _connect(scheduler):
         return Client(scheduler, timeout="20s"), True
     except (OSError, TimeoutError, ValueError) as exc:
         raise InputDataError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
+
+
+def _by_value() -> None:
+    """Models loaded from a ``path/file.py`` (modules ``_phs_model_*`` of :mod:`phs.workflows.loader`, which the
+    workers cannot import) travel to them by value."""
+    import sys
+
+    import cloudpickle
+
+    for name, module in list(sys.modules.items()):
+        if name.startswith("_phs_model_"):
+            cloudpickle.register_pickle_by_value(module)

@@ -119,6 +119,8 @@ class Trials(ResultMixin):
         return {k: _stats([(r["trial"], r.get("nominal", {}).get(k)) for r in self.diagnosed]) for k in names}
 
     def to_dict(self) -> dict:
+        """The trials (their verdicts, effects, nominal parameters), :meth:`recurring`, :meth:`nominal_spread`,
+        the joint fit of the shared parameters and the failed and refused trials: the summary JSON."""
         return {"system": self.system, "trials": [{k: r.get(k) for k in ("trial", "status", "verdict", "effects", "nominal",
                                                                           "seconds", "error")} for r in self.records],
                 "recurring": self.recurring(), "nominal": self.nominal_spread(), "shared": self.shared,
