@@ -190,7 +190,7 @@ CASES = [
         id="asin domain left during simulation"),
     ("declared condition left during simulation", lambda S: simulate(
         _domain_condition_system(), np.linspace(0.0, 20.0, 201), u={"F": 5.0}), DomainError,
-     ["t=0.9", "l_e >= 0"]),
+     ["t=0.8", "l_e >= 0"]),  # the first point outside, within the output interval 0.8-0.9 (t=0.825)
     ("time grid not increasing", lambda S: simulate(S["rc"], [0.0, 1e-3, 1e-3, 2e-3]), InputDataError,
      ["index 2"]),
     ("time grid of one point", lambda S: simulate(S["rc"], [0.0]), InputDataError, ["time grid"]),
