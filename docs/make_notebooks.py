@@ -10,7 +10,7 @@ where there is no ``__file__`` and ``sys.argv`` holds the kernel's own arguments
 the documentation's own figures are not overwritten) and sets the script's options (``--quick`` with
 ``--quick``: the reduced size the tests run).  Notebooks are written without outputs, into ``notebooks/``
 by default; run them to produce the outputs.  NAMEs (``new_actuator``) choose scripts; default: every
-script of ``docs/examples/`` that has cells.  Needs ``jupytext`` (``pip install jupytext``).
+script of ``docs/examples/`` that has cells.  Needs ``jupytext`` (``pip install ".[docs]"``).
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import jupytext  # noqa: F401
     except ImportError:
-        print("make_notebooks: error: jupytext is not installed (pip install jupytext)", file=sys.stderr)
+        print("make_notebooks: error: jupytext is not installed (pip install jupytext, or '.[docs]')", file=sys.stderr)
         return 2
     import nbformat
 
