@@ -17,6 +17,8 @@ cases).
     python bench/diagnose.py --effects all         # every effect of both generators (long)
     python bench/diagnose.py --effects loop:absorbed,time_delay --seconds 8
     python bench/diagnose.py --quick               # 4 s recordings, two cases (smoke test)
+    python bench/diagnose.py --lab --no-baseline   # lab-protocol recordings, 17 s, five free parameters
+    python bench/diagnose.py --lab --quick --no-baseline   # two 3 s lab cases (smoke test)
 
 The baseline, measured in the same run (``--no-baseline`` skips it), is the same diagnosis without
 screening: every hypothesis fitted jointly to convergence (``refit_top=0``).
@@ -27,6 +29,18 @@ seconds, verdict, expected, fit before/after on validation, ``load_before`` the 
 started, the baseline's), ``load_before_max`` and ``cpus`` (to read the run against ``target_seconds``
 idle or ``target_seconds_loaded``), ``speedup_vs_baseline``, ``baseline_verdict_correct`` and
 ``same_verdicts_as_baseline``.
+
+Every case also reports ``cpu_seconds`` (this process and its forked workers: ``getrusage`` SELF +
+CHILDREN) and ``phases``, where the wall and CPU seconds went: ``nominal fit``, ``location``,
+``screening``, ``refits`` (joint refits, deferred and located-family refits, polish; every fit when
+``refit_top=0``), ``discovery`` and ``other`` (the rest of the diagnosis).  The phases are timed from
+outside: the bench wraps functions of :mod:`phs.workflows.diagnose` with timers (:func:`install_clock`).
+
+``--lab`` runs the lab-protocol recordings of :mod:`examples.lab_protocols` instead (17 s by default:
+rests, smooth-edged and held squares, staircases, chirp bursts, PRBS, at 500 Hz to 2 kHz; the
+electrostatic actuator and the MSD HASEL, five free nominal parameters each, truths integrated by
+scipy outside the framework's simulator); ``--lab --quick`` runs two 3 s lab cases.  The JSON then has
+``lab: true`` and the same keys.
 """
 
 from __future__ import annotations
@@ -34,12 +48,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import sys
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from examples import concealed_loops  # noqa: E402
+from examples import concealed_loops, lab_protocols  # noqa: E402
 from examples.concealed_effects import EFFECTS, NOMINAL_FREE, generate  # noqa: E402
 from phs.workflows.diagnose import diagnose  # noqa: E402
 from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
@@ -47,9 +62,84 @@ from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
 DEFAULT = ["charge_retention", "cubic_stiffness", "coulomb_friction", "time_delay", "none", "loop:absorbed",
            "loop:quantised_encoder"]
 LOOPS = [f"loop:{c}" for c in concealed_loops.CASES]
+LAB_QUICK = ["esa:cubic_stiffness@500Hz", "msd:none@500Hz"]
+PHASES = ("nominal fit", "location", "screening", "refits", "discovery", "other")
+
+
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and of its waited-for children (the forked workers)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+class PhaseClock:
+    """Wall and CPU seconds spent in the outermost call of each wrapped function, by phase."""
+
+    def __init__(self):
+        self.depth, self.wall, self.cpu, self.wrapped = 0, {}, {}, []
+
+    def reset(self):
+        self.wall, self.cpu = {}, {}
+
+    def wrap(self, module, attr, phase_of):
+        fn = getattr(module, attr, None)
+        if fn is None or getattr(fn, "_bench_clock", False):
+            return
+        clock = self
+
+        def timed(*a, **k):
+            if clock.depth:  # inside another timed phase (or in a forked worker): counted there
+                return fn(*a, **k)
+            phase = phase_of(a, k)
+            clock.depth += 1
+            w0, c0 = time.perf_counter(), cpu_seconds()
+            try:
+                return fn(*a, **k)
+            finally:
+                clock.depth -= 1
+                clock.wall[phase] = clock.wall.get(phase, 0.0) + time.perf_counter() - w0
+                clock.cpu[phase] = clock.cpu.get(phase, 0.0) + cpu_seconds() - c0
+
+        timed._bench_clock = True
+        setattr(module, attr, timed)
+        self.wrapped.append(f"{module.__name__}.{attr}")
+
+    def split(self, wall: float, cpu: float) -> dict:
+        """Per phase ``{"wall": s, "cpu": s}``; ``other`` is what the wrapped phases leave of ``wall``, ``cpu``."""
+        out = {p: {"wall": round(self.wall.get(p, 0.0), 2), "cpu": round(self.cpu.get(p, 0.0), 2)} for p in PHASES[:-1]}
+        out["other"] = {"wall": round(max(0.0, wall - sum(self.wall.values())), 2),
+                        "cpu": round(max(0.0, cpu - sum(self.cpu.values())), 2)}
+        return out
+
+
+def install_clock() -> PhaseClock:
+    """Wrap the diagnosis' phases with timers (before any fork, so the workers inherit the wrappers): the
+    nominal fit, the location of the mismatch, each batch of hypothesis fits (screening or refit by its
+    label) and the discovery of a correction outside the library.  A function that is not there is not
+    timed (its seconds fall to ``other``)."""
+    import phs.workflows.diagnose.discover as disc
+    import phs.workflows.diagnose.nominal as nom
+    import phs.workflows.diagnose.run as run
+    import phs.workflows.diagnose.screening as scr
+
+    clock = PhaseClock()
+    clock.wrap(nom, "fit_nominal", lambda a, k: "nominal fit")
+    clock.wrap(run, "_locate", lambda a, k: "location")
+
+    def batch(a, k):
+        label = k.get("label", a[5] if len(a) > 5 else "")
+        return "screening" if "screening" in str(label) else "refits"
+    clock.wrap(scr, "_run_all", batch)
+    clock.wrap(disc, "discover", lambda a, k: "discovery")
+    clock.wrap(disc, "without_library", lambda a, k: "discovery")
+    return clock
+
+
+CLOCK: PhaseClock | None = None
 
 
 def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) -> dict:
+    kw = {}
     if effect.startswith("loop:"):
         case = effect.split(":", 1)[1]
         train, info = concealed_loops.generate(case, seconds=seconds, seed=1)
@@ -60,6 +150,16 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
             where = info.get("place")
             return (sorted(d.verdict["effects"]) == sorted(info["effects"])
                     and (where is None or all(a.augmentation.attached_to == where for a in d.accepted)))
+    elif effect in lab_protocols.LAB_CASES:
+        train, info = lab_protocols.generate(effect, seconds=seconds, seed=1)
+        val, _ = lab_protocols.generate(effect, seconds=seconds, seed=2, validation=True)
+        act = lab_protocols.ACTUATORS[info["actuator"]]
+        model, free = act.nominal(), info["free"]
+        kw = {"x0": info["x0"], "outputs": list(act.channels)}
+        truth_effect = info["effect"]
+
+        def right(d):  # the verdict names the concealed effect
+            return d.effect == truth_effect
     else:
         train, _ = generate(effect, seconds=seconds, seed=1)
         val, _ = generate(effect, seconds=seconds, seed=2, validation=True)
@@ -67,11 +167,17 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
 
         def right(d):  # the verdict names the concealed effect
             return d.effect == effect
-    t0 = time.perf_counter()
-    d = diagnose(model, train, validation=val, free=list(free), n_jobs=jobs, refit_top=refit_top)
-    sec = time.perf_counter() - t0
+    if CLOCK is not None:
+        CLOCK.reset()
+    c0, t0 = cpu_seconds(), time.perf_counter()
+    d = diagnose(model, train, validation=val, free=list(free), n_jobs=jobs, refit_top=refit_top, **kw)
+    sec, cpu = time.perf_counter() - t0, cpu_seconds() - c0
+    phases = CLOCK.split(sec, cpu) if CLOCK is not None else None
     return {
-        "seconds": round(sec, 2), "verdict": d.effect, "effects": d.verdict["effects"], "expected": effect,
+        "seconds": round(sec, 2), "cpu_seconds": round(cpu, 2), "phases": phases,
+        "diagnosis_seconds": round(d.seconds, 2), "samples": len(train),
+        "hypotheses_fitted": sum(len(r) for r in d.rounds),
+        "verdict": d.effect, "effects": d.verdict["effects"], "expected": effect,
         "correct": right(d), "confidence": d.verdict["confidence"],
         "validation_fit_before": {k: round(v, 2) for k, v in d.nominal.validation_fit_percent.items()},
         "validation_fit_after": {k: round(v, 2) for k, v in d.final.validation_fit_percent.items()},
@@ -83,15 +189,29 @@ def main(argv=None) -> dict:
     ap.add_argument("--seconds", type=float, default=20.0, help="recording length [s] (default 20)")
     ap.add_argument("--effects", default=",".join(DEFAULT), help="comma-separated effects, or 'all'")
     ap.add_argument("--jobs", type=int, default=None, help="processes (default: CPUs, at most 4)")
-    ap.add_argument("--quick", action="store_true", help="4 s recordings, two cases")
+    ap.add_argument("--quick", action="store_true", help="4 s recordings, two cases (with --lab: 3 s, two lab cases)")
+    ap.add_argument("--lab", action="store_true",
+                    help="the lab-protocol recordings of examples/lab_protocols.py (17 s by default; --effects picks among them)")
     ap.add_argument("--no-baseline", action="store_true",
                     help="skip the baseline: every hypothesis fitted to convergence (refit_top=0), no screening")
     args = ap.parse_args(argv)
+    global CLOCK
+    CLOCK = CLOCK or install_clock()
     effects = EFFECTS + LOOPS if args.effects == "all" else [e.strip() for e in args.effects.split(",")]
     seconds = args.seconds
-    if args.quick:
+    if args.lab:
+        lab = list(lab_protocols.LAB_CASES)
+        effects = lab if args.effects in ("all", ",".join(DEFAULT)) else effects
+        unknown = [e for e in effects if e not in lab]
+        if unknown:
+            ap.error(f"--lab: unknown case(s) {unknown}; known: {', '.join(lab)}")
+        seconds = 17.0 if args.seconds == 20.0 else args.seconds
+        if args.quick:
+            effects, seconds = LAB_QUICK, 3.0
+    elif args.quick:
         effects, seconds = ["charge_retention", "none"], 4.0
     cases = {}
+    load_start = os.getloadavg() if hasattr(os, "getloadavg") else None
     for e in effects:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
         r = run_case(e, seconds, args.jobs)
@@ -99,6 +219,8 @@ def main(argv=None) -> dict:
         cases[e] = r
         print(f"{e:<24} {r['seconds']:7.1f} s  verdict {r['verdict']:<20} {'ok' if r['correct'] else 'WRONG'}  "
               f"validation fit {r['validation_fit_before']} -> {r['validation_fit_after']}", flush=True)
+        print(f"{'':<24} cpu {r['cpu_seconds']:.1f} s, load {r['load_before']}; wall/cpu s: "
+              + ", ".join(f"{p} {v['wall']:.1f}/{v['cpu']:.1f}" for p, v in r["phases"].items()), flush=True)
         if not args.no_baseline:  # the same diagnosis with every hypothesis fitted jointly to convergence
             b = run_case(e, seconds, args.jobs, refit_top=0)
             r["baseline"] = {k: b[k] for k in ("seconds", "verdict", "effects", "correct", "validation_fit_after")}
@@ -110,7 +232,11 @@ def main(argv=None) -> dict:
            "verdict_correct": sum(c["correct"] for c in cases.values()) / len(cases), "recording_seconds": seconds,
            "target_seconds": 40, "target_seconds_loaded": 60, "cpus": os.cpu_count(),
            "load_before_max": max((c["load_before"] for c in cases.values() if c["load_before"] is not None), default=None),
-           "cases": cases}
+           "cases": cases, "lab": bool(args.lab),
+           "cpu_seconds_per_case": round(sum(c["cpu_seconds"] for c in cases.values()) / len(cases), 2),
+           "load_average_start": None if load_start is None else [round(v, 2) for v in load_start],
+           "load_average_end": [round(v, 2) for v in os.getloadavg()] if hasattr(os, "getloadavg") else None,
+           "timed_functions": CLOCK.wrapped}
     if not args.no_baseline:
         base = [c["baseline"]["seconds"] for c in cases.values()]
         out["baseline_seconds_per_case"] = round(sum(base) / len(base), 2)

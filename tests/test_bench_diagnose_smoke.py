@@ -1,5 +1,6 @@
-"""Smoke test of bench/diagnose.py (slow: two 4 s diagnoses): the quick run completes, names both
-concealed cases right and reports its figures with the load it ran under."""
+"""Smoke test of bench/diagnose.py (slow: two 4 s diagnoses; with ``--lab``, two 3 s lab-protocol ones): the
+quick runs complete, name both concealed cases right and report their figures with the load they ran under,
+the CPU seconds and where the time went."""
 
 from __future__ import annotations
 
@@ -27,3 +28,29 @@ def test_quick_diagnosis_benchmark_reports_json():
     assert figures["seconds_per_case"] == pytest.approx(
         sum(c["seconds"] for c in figures["cases"].values()) / 2, abs=0.01)
     assert all(c["load_before"] is None or c["load_before"] >= 0 for c in figures["cases"].values())
+    _check_timing(figures)
+
+
+def _check_timing(figures):
+    """Every case's CPU seconds and phase split: the phases' wall seconds add up to the case's (``other`` is the
+    rest), and the nominal fit and the screening took time."""
+    for c in figures["cases"].values():
+        assert c["cpu_seconds"] > 0
+        phases = c["phases"]
+        assert set(phases) == {"nominal fit", "location", "screening", "refits", "discovery", "other"}
+        assert sum(v["wall"] for v in phases.values()) == pytest.approx(c["seconds"], abs=0.1)
+        assert phases["nominal fit"]["wall"] > 0 and phases["screening"]["wall"] > 0
+
+
+@pytest.mark.slow
+def test_quick_lab_benchmark_names_both_cases_and_times_the_phases():
+    """``--lab --quick``: two 3 s lab-protocol recordings (the electrostatic actuator at 500 Hz with a stiffening
+    suspension, the MSD HASEL's control at 500 Hz), five free parameters each."""
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--lab", "--quick", "--no-baseline"], capture_output=True,
+                          text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    figures = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert KEYS <= figures.keys() and figures["lab"] is True
+    assert set(figures["cases"]) == {"esa:cubic_stiffness@500Hz", "msd:none@500Hz"}
+    assert figures["verdict_correct"] == 1.0, {k: c["verdict"] for k, c in figures["cases"].items()}
+    _check_timing(figures)
