@@ -159,7 +159,11 @@ def _transformed(rec: Recording, element, where: str, theta) -> Recording:
     between = {k: v for k, v in rec.between.items() if k not in driven}
     between.update(element.drive_between(rec.t, sig, where, theta))
     sig.update(driven)
-    return Recording(rec.t, sig, rec.source, rec.units, between)
+    # the other inputs keep how they behave between samples (a disturbance held by a DAC stays held); an input the
+    # element sets keeps a declared hold ("zoh": the element maps held samples to held samples) but not a declared
+    # law, which its new samples no longer follow
+    holds = {k: h for k, h in rec.holds.items() if k not in driven or isinstance(h, str)}
+    return replace(rec, signals=sig, between=between, holds=holds)
 
 
 def _element_key(aug) -> str:
