@@ -110,6 +110,15 @@ def _diagnosis():
     return diagnose(rc_circuit(), _rc_recording(), free=["R.R"], candidates=[Offset()], n_jobs=1)
 
 
+def _trials():
+    from components.candidates import Offset
+    from phs.workflows.diagnose.trials import diagnose_trials
+    from systems.examples import rc_circuit
+
+    rec = _rc_recording()
+    return diagnose_trials(rc_circuit(), {"a": rec, "b": rec}, free=["R.R"], candidates=[Offset()], n_jobs=1)
+
+
 def _study():
     from phs.workflows.sweep import Study, sweep
     from systems.examples import rc_circuit
@@ -151,6 +160,7 @@ BUILD = {
     "phs.workflows.identify.result.IdentificationResult": _identification,
     "phs.workflows.diagnose.result.Diagnosis": _diagnosis,
     "phs.workflows.sweep.result.StudyResult": _study,
+    "phs.workflows.diagnose.trials_summary.Trials": _trials,
     "codegen.passivity.report.PassivityReport": _passivity,
     "phs.equilibria.EquilibriumResult": _equilibrium,
     "codegen._linearization.LinearizationResult": _linearization,

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from phs._results import ResultMixin, finish, panels
+from phs._results import ResultMixin, finish, panels, require_pandas
 
 
 def trial_record(name: str, d) -> dict:
@@ -147,6 +147,22 @@ class Trials(ResultMixin):
         for k, s in self.nominal_spread().items():
             w.writerow(["nominal", n, n, "1"] + [k] + [_g(s[c]) for c in ("n", "mean", "std", "min", "max")])
         return buf.getvalue()
+
+    def to_pandas(self):  # noqa: ANN201 - pandas is optional
+        """:meth:`to_csv`'s table as a DataFrame: one row per effect and parameter, then the nominal parameters.
+
+        Examples
+        --------
+        >>> rec = {"trial": "a", "status": "ok", "verdict": {"effect": "offset"},
+        ...        "effects": [{"effect": "offset", "parameters": {"offset.y": 0.05}}], "nominal": {}}
+        >>> df = Trials("m", [rec, {**rec, "trial": "b"}]).to_pandas()  # doctest: +SKIP
+        >>> df[["effect", "trials", "parameter", "mean"]].values.tolist()  # doctest: +SKIP
+        [['offset', 2, 'offset.y', 0.05]]
+        """
+        require_pandas("Trials.to_pandas()")
+        import pandas as pd
+
+        return pd.read_csv(io.StringIO(self.to_csv()))
 
     def summary(self) -> str:
         """The table ``phs diagnose`` prints for several recordings."""
