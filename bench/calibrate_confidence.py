@@ -8,8 +8,11 @@ the mismatch it explains and whether its residual stays above the noise (``expla
 score the confidence is built from (``Diagnosis.verdict["score"]``: ``0.5 + 0.5 (g1 - g2) / g1``
 for an effect, ``1 - g / (2 MIN_VALIDATION_GAIN)`` for ``none``, before the calibration, the failure
 factor and the cap).  Then it fits the share of right verdicts as a non-decreasing function of the raw
-score (blocks of at least ten verdicts, pooled adjacent violators, each level Laplace-smoothed) and
-prints the reliability table and the knots that ``phs.workflows.diagnose.ranking.CALIBRATION`` holds.
+score (blocks of at least ten verdicts, pooled adjacent violators, each level Laplace-smoothed:
+:func:`phs.workflows.diagnose.calibration.fit_knots`) and prints the reliability table and the knots that
+``phs.workflows.diagnose.ranking.CALIBRATION`` holds, then the calibration cross-validated
+(:func:`phs.workflows.diagnose.calibration.cross_validate`, grouped by concealed effect, by strength and by
+seed: the Brier score and the reliability in sample, held out, and of the confidence the diagnosis reports).
 
     python bench/calibrate_confidence.py --out cal-0.jsonl --shard 0/2 &   # one process per core
     python bench/calibrate_confidence.py --out cal-1.jsonl --shard 1/2
@@ -19,8 +22,9 @@ A shard skips the cases its file already holds (a stopped run resumes).
 
 The last line printed by ``--fit`` is one JSON object: ``cases``, ``right``, ``brier_raw`` (mean squared
 difference between raw score and rightness, lower is better), ``brier_now`` (the same for the confidence
-the installed :data:`~phs.workflows.diagnose.ranking.CALIBRATION` gives), and ``knots`` per kind of
-verdict (``effect``, ``none``).
+the installed calibration gives: :func:`~phs.workflows.diagnose.ranking.calibrated`), ``knots`` per kind of
+verdict (``effect``, ``none``), ``held_out_knots`` (what ``ranking.HELD_OUT_CALIBRATION`` holds) and
+``cross_validation`` (per grouping, the figures of ``CrossValidation``).
 """
 
 from __future__ import annotations
@@ -74,42 +78,18 @@ def run(shard: int, n_shards: int, out: str, seconds: float) -> None:
         write_atomic(out, "\n".join(lines) + "\n")
 
 
-MIN_BLOCK = 10
-"""Fewest verdicts behind one level of the calibration."""
-
-
 def _knots(s, y):
-    """Non-decreasing share of right verdicts ``y`` against scores ``s`` (sorted): consecutive blocks of at
-    least :data:`MIN_BLOCK` verdicts, pooled where a block's share falls below the one before (adjacent
-    violators), each pooled level then smoothed by Laplace's rule ``(right + 1) / (n + 2)`` (a handful of
-    verdicts never gives 0 or 1); one knot at the start of each level."""
-    from scipy.optimize import isotonic_regression
+    """Knots of rightness ``y`` against scores ``s``: :func:`phs.workflows.diagnose.calibration.fit_knots`."""
+    from phs.workflows.diagnose.calibration import fit_knots
 
-    n = len(s)
-    edges = list(range(0, n, MIN_BLOCK))
-    if len(edges) > 1 and n - edges[-1] < MIN_BLOCK:
-        edges.pop()  # the last block absorbs the remainder
-    edges.append(n)
-    sizes = np.diff(edges)
-    shares = np.array([y[a:b].mean() for a, b in zip(edges[:-1], edges[1:], strict=True)])
-    levels = isotonic_regression(shares, weights=sizes, increasing=True).x
-    starts = [k for k in range(len(levels)) if k == 0 or levels[k] != levels[k - 1]] + [len(levels)]
-    smoothed = []
-    for a, b in zip(starts[:-1], starts[1:], strict=True):
-        lo, hi = edges[a], edges[b]
-        smoothed.append(((y[lo:hi].sum() + 1) / (hi - lo + 2), hi - lo))
-    vals = isotonic_regression([v for v, _ in smoothed], weights=[m for _, m in smoothed], increasing=True).x
-    return [(round(float(s[edges[a]]), 3), round(float(v), 3)) for k, (a, v) in enumerate(zip(starts[:-1], vals, strict=True))
-            if k == 0 or v != vals[k - 1]]
+    return fit_knots(s, y)
 
 
 def fit(paths) -> dict:
+    from phs.workflows.diagnose.calibration import cross_validate, held_out_knots, load_rows
     from phs.workflows.diagnose.ranking import calibrated
 
-    rows = []
-    for p in paths:
-        with open(p) as f:
-            rows += [json.loads(ln) for ln in f if ln.strip()]
+    rows = [r for p in paths for r in load_rows(p)]
     out = {"cases": len(rows), "right": sum(r["right"] for r in rows), "knots": {}}
     print(f"{len(rows)} verdicts, {out['right']} right")
     print("| verdict | raw score | verdicts | right | share right | calibrated confidence (mean) |")
@@ -132,6 +112,16 @@ def fit(paths) -> dict:
         sq_cal += list((np.array([calibrated(v, kind) for v in s]) - y) ** 2)
     out["brier_raw"] = round(float(np.mean(sq_raw)), 4)
     out["brier_now"] = round(float(np.mean(sq_cal)), 4)
+    out["held_out_knots"] = held_out_knots(rows)
+    out["cross_validation"] = {}
+    print("\n| grouped by | groups | Brier: raw | in sample | held out | reported | reliability: in sample | held out | reported |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for by in ("effect", "size", "seed"):
+        cv = cross_validate(rows, by=by).to_dict()
+        out["cross_validation"][by] = cv
+        print(f"| {by} | {cv['groups']} | {cv['raw_brier']:.3f} | {cv['in_sample_brier']:.3f} | {cv['held_out_brier']:.3f} | "
+              f"{cv['reported_brier']:.3f} | {cv['in_sample_reliability']:.3f} | {cv['held_out_reliability']:.3f} | "
+              f"{cv['reported_reliability']:.3f} |")
     return out
 
 
