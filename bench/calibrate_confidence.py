@@ -117,11 +117,11 @@ def fit(paths) -> dict:
     print("\n| grouped by | groups | Brier: raw | in sample | held out | reported | reliability: in sample | held out | reported |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for by in ("effect", "size", "seed"):
-        cv = cross_validate(rows, by=by).to_dict()
-        out["cross_validation"][by] = cv
-        print(f"| {by} | {cv['groups']} | {cv['raw_brier']:.3f} | {cv['in_sample_brier']:.3f} | {cv['held_out_brier']:.3f} | "
-              f"{cv['reported_brier']:.3f} | {cv['in_sample_reliability']:.3f} | {cv['held_out_reliability']:.3f} | "
-              f"{cv['reported_reliability']:.3f} |")
+        cv = cross_validate(rows, by=by)
+        out["cross_validation"][by] = cv.to_dict()
+        print(f"| {by} | {cv.groups} | {cv.raw_brier:.3f} | {cv.in_sample_brier:.3f} | {cv.held_out_brier:.3f} | "
+              f"{cv.reported_brier:.3f} | {cv.in_sample_reliability:.3f} | {cv.held_out_reliability:.3f} | "
+              f"{cv.reported_reliability:.3f} |")
     return out
 
 
