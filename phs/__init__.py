@@ -31,6 +31,7 @@ __all__ = [
     "InterconnectionError", "ModelError", "ParameterError", "PHSError", "SimulationError", "UnitError",
     "bond", "feedback_link", "feedback", "parallel", "series", "Condition", "InputInfo", "Measured", "Param", "StateInfo", "PHSystem",
     "interconnect", "equilibrium", "EquilibriumResult", "signals", "simulate", "identify", "diagnose", "sweep", "Recording", "load",
+    "Summary",
     "linearize",
 ]
 
@@ -50,7 +51,7 @@ def load(path) -> PHSystem:
     return PHSystem.load(path)
 
 
-_LAZY = ("simulate", "identify", "diagnose", "sweep", "Recording", "linearize")
+_LAZY = ("simulate", "identify", "diagnose", "sweep", "Recording", "linearize", "Summary")
 
 
 def __dir__():
@@ -83,6 +84,10 @@ def __getattr__(name):
         from phs.workflows.recording import Recording
 
         return Recording
+    if name == "Summary":
+        from phs.workflows.identify.summaries import Summary
+
+        return Summary
     if name == "diagnose":
         from phs.workflows.diagnose import diagnose
 

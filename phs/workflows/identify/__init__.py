@@ -25,7 +25,9 @@ Modules: :mod:`~phs.workflows.identify.solve` (the driver, :func:`identify`),
 :mod:`~phs.workflows.identify.c_library` (their compiled C), :mod:`~phs.workflows.identify.coordinates`
 (log scaling, bounds, channel weights), :mod:`~phs.workflows.identify.result`
 (:class:`IdentificationResult`, uncertainty), :mod:`~phs.workflows.identify.identifiability` (the
-Jacobian's numerical rank, the identified and free combinations), :mod:`~phs.workflows.identify.scoring` (NRMSE fit %) and
+Jacobian's numerical rank, the identified and free combinations), :mod:`~phs.workflows.identify.scoring` (NRMSE fit %),
+:mod:`~phs.workflows.identify.summaries` (fits to summary statistics of runs: means, ranges, final values, as a
+paper's table reports them) and
 :mod:`~phs.workflows.identify.sensitivity_table` (the ±5/±10 % table).
 """
 
@@ -33,5 +35,6 @@ from phs.workflows.identify.result import IdentificationResult
 from phs.workflows.identify.scoring import evaluate_fit, nrmse_fit
 from phs.workflows.identify.sensitivity_table import sensitivity_markdown
 from phs.workflows.identify.solve import identify
+from phs.workflows.identify.summaries import Summary, SummaryFit
 
-__all__ = ["identify", "IdentificationResult", "nrmse_fit", "evaluate_fit", "sensitivity_markdown"]
+__all__ = ["identify", "Summary", "SummaryFit", "IdentificationResult", "nrmse_fit", "evaluate_fit", "sensitivity_markdown"]

@@ -20,6 +20,7 @@ from phs.workflows.identify.coordinates import _bounds, _channel_weights, _log_s
 from phs.workflows.identify.result import IdentificationResult, _uncertainty, relative_factor
 from phs.workflows.identify.scoring import _simulate_outputs, nrmse_fit
 from phs.workflows.identify.sensitivities import _Problem
+from phs.workflows.identify.summaries import identify_summaries, is_summaries
 from phs.workflows.inputs import check_uniform
 
 ML_PASSES = 3
@@ -46,9 +47,14 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     Parameters
     ----------
     system : PHSystem
-    recording : phs.workflows.recording.Recording
+    recording : phs.workflows.recording.Recording, or Summary or sequence of Summary
         Uniformly sampled; provides every input of the system and the fitted outputs.  Signals in other
         units than the model's (a header ``U [kV]``) are converted (:meth:`~phs.workflows.recording.Recording.in_units_of`).
+        Runs known only by statistics of their channels (a paper's table of means or ranges) are
+        :class:`~phs.workflows.identify.summaries.Summary` objects: the fit is then to those statistics, with
+        ``bounds``, ``x0``, ``log_scale``, ``initial``, ``rtol``, ``atol``, ``max_iter``, ``ftol``, ``compile`` and
+        ``weights`` (label -> weight; default relative errors) as here, and returns a
+        :class:`~phs.workflows.identify.summaries.SummaryFit` (:mod:`phs.workflows.identify.summaries`).
     free : sequence of str
         Parameters to fit.
     bounds : dict of str -> (lo, hi), optional
@@ -119,6 +125,15 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     >>> round(fit.values["R.R"])
     2000
     """
+    if is_summaries(recording):
+        other = {"outputs": outputs is not None, "estimate_x0": bool(estimate_x0), "validation": validation is not None,
+                 "shooting": shooting != 1, "progress": bool(progress), "ml_start": ml_start is not None,
+                 "weights='ml'": isinstance(weights, str)}
+        if any(other.values()):
+            raise ParameterError(f"identify: {', '.join(k for k, v in other.items() if v)} do(es) not apply to a fit to "
+                                 "summary statistics")
+        return identify_summaries(system, recording, free, bounds=bounds, x0=x0, weights=weights, log_scale=log_scale,
+                                  initial=initial, rtol=rtol, atol=atol, max_iter=max_iter, ftol=ftol, compile=compile)
     recording = recording.in_units_of(system)  # units of the file's headers (kV, mm) to the model's
     validation = validation.in_units_of(system) if validation is not None else None
     if ml_start is not None and weights != "ml":
