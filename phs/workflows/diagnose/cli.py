@@ -128,7 +128,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
 
 EXIT_REFUSED = 1
 """Exit code of ``phs diagnose`` when the nominal model cannot describe the recording (no effect named; one
-line on stderr says which channel and what to check)."""
+line on stderr says which channel and what to check).  A convention, not a measurement."""
 
 _REPORT = ("index.html", "fits.png", "hypotheses.png", "locate.png", "diagnosis.json", "summary.txt")  # --report DIR
 

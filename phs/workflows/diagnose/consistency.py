@@ -30,11 +30,14 @@ from dataclasses import dataclass
 POINTER_SHARE = 0.05
 """Smallest share of a channel's residual (variance for a feature, power for the odd harmonics together) a
 significant finding must carry to point at a family: a significant but minor feature (a few per cent of a
-residual dominated by something else) says little about what is missing."""
+residual dominated by something else) says little about what is missing.
+Not chosen on a measurement (no concealed case recorded)."""
 DISAGREE_FACTOR = 0.6
 """Factor on the confidence of a verdict that names nothing of a family the located mismatch points at.
 A ``none`` verdict (confidence 0.5 at best) then ends at 0.3, below any accepted effect's confidence, and
-a named effect at 0.9 ends near the confidence of a verdict with a rival only screened."""
+a named effect at 0.9 ends near the confidence of a verdict with a rival only screened.
+Chosen by that ordering, not on a measurement: the stored calibration diagnoses do not record a
+disagreement, so no held-out figure can be computed from them."""
 
 FAMILIES = {
     "dry friction": ("coulomb_friction", "hysteresis"),

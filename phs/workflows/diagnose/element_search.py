@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 EXTRAPOLATE = (1.0, 2.0, 4.0, 8.0)
-"""Multiples of a round's move tried beyond its end (:func:`extrapolate`)."""
+"""Multiples of a round's move tried beyond its end (:func:`extrapolate`).  Not chosen on a measurement."""
 
 
 def extrapolate(cost, specs, free, bounds, start, end, c_end: float, tol: float = 0.0) -> tuple | None:
@@ -69,8 +69,10 @@ REFINE_ITER = 8
 the bracket shrinks to about 2 % of its width).  A screening fit, which only ranks the hypotheses and whose
 chosen few are refitted from its values, refines by :data:`SCREEN_REFINE_ITER` (about 15 % of the bracket:
 a grid step is a factor of 2.4 on a log-spaced range, so within about 14 % of the parameter's best value,
-where the cost is flat to second order)."""
+where the cost is flat to second order).  Chosen by that arithmetic, not on a verdict measurement."""
 SCREEN_REFINE_ITER = 4
+"""Most cost evaluations of a screening fit's bounded refinement (see :data:`REFINE_ITER`).  Chosen by that
+arithmetic, not on a verdict measurement."""
 
 
 def element_search(cost, specs, theta, local: bool = False, refine_iter: int = REFINE_ITER) -> list[float]:

@@ -14,15 +14,17 @@ import numpy as np
 from phs.workflows.diagnose.calibration import reported
 
 MIN_BIC_GAIN = 10.0
-"""Training BIC decrease needed to accept a hypothesis ("very strong" evidence on the Kass-Raftery scale)."""
+"""Training BIC decrease needed to accept a hypothesis ("very strong" evidence on the Kass-Raftery scale).
+A convention, not a measurement."""
 MIN_VALIDATION_GAIN = 0.01
-"""Relative decrease of the validation residual needed to accept a hypothesis."""
+"""Relative decrease of the validation residual needed to accept a hypothesis.  Not chosen on a measurement."""
 SUFFICIENT_MARGIN = 0.03
 """Hypotheses within this relative margin of the best validation residual and of the best training residual
-count as equally good (:func:`_pick`)."""
+count as equally good (:func:`_pick`).  Not chosen on a measurement."""
 FAILED_FACTOR = 0.9
 """Each hypothesis whose fit failed (every retry included) multiplies the verdict's confidence by this:
-it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1."""
+it is a rival that could not be weighed, so a verdict with a failed hypothesis never reports 1.
+A convention, not a measurement (no stored calibration diagnosis had a failed hypothesis)."""
 CALIBRATION: dict = {
     "effect": ((0.401, 0.75), (0.561, 0.865), (0.969, 0.944)),
     "none": ((0.63, 0.5),),
@@ -65,7 +67,8 @@ highest level of :data:`HELD_OUT_CALIBRATION` (0.897) it does not bind."""
 FRICTION_LIKE = 0.05
 """A hysteresis loop whose saturated deflection ``F_h / (k_h (1 + eta))`` is below this share of the
 displacement's standard deviation is friction with a pre-sliding regime, not a loop of the material:
-when smooth Coulomb friction at the same place is accepted too, it is the simpler explanation."""
+when smooth Coulomb friction at the same place is accepted too, it is the simpler explanation.
+Not chosen on a measurement."""
 
 
 def calibrated(score: float, kind: str = "effect") -> float:

@@ -26,13 +26,15 @@ SHAPE_FLOOR = 0.5
 """Least correlation between a channel's simulated and recorded values.  ``ρ²`` is the share of the
 recorded variance that the simulated output explains after the best gain *and* offset (the R² of the
 affine regression of the recording on the simulation): below ``ρ = 0.5`` not even a quarter, whatever
-scale or sensor zero is assumed; a negative ``ρ`` is a response of the opposite sign."""
+scale or sensor zero is assumed; a negative ``ρ`` is a response of the opposite sign.
+Chosen by that argument and checked on the refusal tests (a unit misread, a flipped sign, a swapped mapping)."""
 
 SCALE_FACTOR = 10.0
 """Largest ratio (either way) between a channel's recorded and simulated standard deviations.  The fit
 has already moved the free parameters to match the amplitude as well as their ranges allow; what is
 left beyond a decade is what no parameter could reach.  A unit prefix (k, m) is a factor 10³, a
-centimetre 10², a bar 10⁵ Pa: after the fit absorbs up to two decades, one is left."""
+centimetre 10², a bar 10⁵ Pa: after the fit absorbs up to two decades, one is left.
+Chosen by that argument, not on a measurement."""
 
 LAG_SAMPLES = 10
 """Most samples by which a channel's response may lead or lag the simulation's and still count as its shape
@@ -40,13 +42,14 @@ LAG_SAMPLES = 10
 missing physics the library names, not a wrong unit, sign or mapping; on a channel made of spikes (a
 capacitor's current at held voltage steps) a few samples of it take the zero-lag correlation far down (a 2 ms
 delay at 2 kHz: 0.40 at lag 0, its spikes four samples apart).  Ten samples is a delay of 10 ms at 1 kHz;
-a sign flipped or a mapping swapped is not undone by it unless the recording repeats within 20 samples."""
+a sign flipped or a mapping swapped is not undone by it unless the recording repeats within 20 samples.
+Chosen on that lab case (``bench/diagnose.py --lab``, seed 1)."""
 
 STILL = 1e-6
 """A simulated channel whose standard deviation is below this share of its own RMS value stays at rest
 (at the integrator's tolerance, 1e-7 to 1e-8, not above): a closed chamber that holds its pressure.  Its
 response says nothing about units or signs; what the recording does beyond a level is the missing
-physics itself (a leak), and the diagnosis goes on."""
+physics itself (a leak), and the diagnosis goes on.  Chosen by the integrator's tolerance, not on a measurement."""
 
 
 def channel_figures(recorded, simulated) -> dict:

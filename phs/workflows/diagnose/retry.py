@@ -29,14 +29,15 @@ from phs.errors import PHSError
 
 STAGES = (0.25, 0.5, 0.75, 1.0)
 """Fractions of the way (in log scale for log-scaled parameters) from the neutral point to the default
-start at which continuation fits; the last stage (1.0) has the full bounds."""
+start at which continuation fits; the last stage (1.0) has the full bounds.  Not chosen on a measurement."""
 TIGHT = 10.0
 """Factor (log-scaled parameters) or tenth of the range (linear ones) boxing the new parameters around
-their default start in the tighter-bounds retry."""
+their default start in the tighter-bounds retry.  Not chosen on a measurement."""
 
 SAME_COST = 1e-4
 """Relative margin within which a start's cost counts as the neutral point's (integration tolerance):
-only a start ending worse than ``reference`` by more calls the neutral rung."""
+only a start ending worse than ``reference`` by more calls the neutral rung.
+Chosen by the integration tolerance, not on a measurement."""
 RECOVERABLE = (PHSError, RuntimeError, ValueError, ArithmeticError, np.linalg.LinAlgError)
 """What a failed fit raises: an integrator failure, non-finite values, a singular system."""
 

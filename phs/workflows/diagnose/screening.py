@@ -15,9 +15,11 @@ from phs.workflows.diagnose.ranking import FRICTION_LIKE, _gain, presliding_shar
 SCREEN_SHARE = 1 / 3
 """Share of a long training recording the screening fits run on (its leading part, see
 :func:`screening_samples`); the most promising hypotheses are then refitted on the whole recording.
-A screening fit only ranks the hypotheses, and its cost grows with the recording's length."""
+A screening fit only ranks the hypotheses, and its cost grows with the recording's length.
+Not chosen on a measurement."""
 SCREEN_MIN_SAMPLES = 3000
-"""Fewest training samples a screening fit runs on (a recording shorter than twice this is screened whole)."""
+"""Fewest training samples a screening fit runs on (a recording shorter than twice this is screened whole).
+Not chosen on a measurement."""
 
 
 def _run_all(nominal, augs, data, n_jobs, progress, label, joint=True, ordered=False, ftols=None):
@@ -296,14 +298,16 @@ TIGHT_REFITS = 2
 ``RIVAL_FTOL`` (they only rank) and on to ``REFIT_FTOL`` only when chosen (:func:`_polished`, after the
 other refits: a wait).  Two, not one: on the 20 s charge-retention case the window's screening ranks the
 viscoelastic creep first and the refits choose the charge retention, whose polish then took 4 s after the
-others; the third there, the stiff hysteresis, stops after 10 evaluations of 1.6 s instead of 14."""
+others; the third there, the stiff hysteresis, stops after 10 evaluations of 1.6 s instead of 14.
+Chosen on that case (seed 1)."""
 
 REFIT_EVIDENCE = 0.0
 """Screening ΔBIC at or below which a hypothesis other than the best screened one is refitted: a screening
 fit that does not even pay for its new parameters is not refitted (the best one always is).  Measured on
 the 28 concealed 3 s cases of ``python bench/refit_evidence.py`` (every effect at full and at 0.35 of its
 strength): no hypothesis screened above it was accepted after its refit, while gains grew up to tenfold
-between screening and refit for hypotheses screened below it (a slow new state far from its start)."""
+between screening and refit for hypotheses screened below it (a slow new state far from its start).
+Chosen on those cases (seed 1)."""
 
 
 def _evidence(base, h) -> bool:

@@ -72,13 +72,15 @@ from phs.system import PHSystem
 
 EFFECT = "discovered"
 THETA_MAX = 30.0
-"""Largest coefficient (in units of the state's own scale) a dictionary term may take."""
+"""Largest coefficient (in units of the state's own scale) a dictionary term may take.  Not chosen on a measurement."""
 THETA_MIN = 1e-9
-"""Smallest nonnegative coefficient: zero itself is refused for parameters declared positive."""
+"""Smallest nonnegative coefficient: zero itself is refused for parameters declared positive.
+A numerical floor, not a measurement."""
 WIDTH = 0.05
-"""Width (in ``z``) over which a one-sided spring engages (softplus smoothing)."""
+"""Width (in ``z``) over which a one-sided spring engages (softplus smoothing).  Not chosen on a measurement."""
 ENGAGE_AT = (0.3, 0.45, 0.6, 0.75)
-"""Where one-sided springs engage, as shares of the largest deflection reached on each side."""
+"""Where one-sided springs engage, as shares of the largest deflection reached on each side.
+Not chosen on a measurement."""
 
 
 def _slug(name: str) -> str:
@@ -138,12 +140,15 @@ _READING = {
     "reading_cube": (X**3, "{via}³"),
 }
 GAIN_BOUNDS = (-0.9, 3.0)
-"""Range of an input-gain coefficient (the gain ``1 + θ φ`` stays positive over the fitted range, ``|φ| ≤ 1``)."""
+"""Range of an input-gain coefficient (the gain ``1 + θ φ`` stays positive over the fitted range, ``|φ| ≤ 1``).
+Chosen by that positivity, not on a measurement: ``1 + θ φ ≥ 0.1`` holds for ``0 ≤ φ ≤ 1`` (the square and
+magnitude shapes); the linear shape with ``φ < 0`` and ``θ > 1`` is not covered."""
 SENSITIVITY = (1e-4, 1e6, 1.0)
-"""Range and start of a heat state's sensitivity ``s`` (the conductance's relative rise per typical heat)."""
+"""Range and start of a heat state's sensitivity ``s`` (the conductance's relative rise per typical heat).
+Not chosen on a measurement."""
 TAU_SPAN = (1 / 50, 100.0)
 """Range of a heat state's time constant, as factors of its start (a tenth of the recording, within 20
-samples and 2 s)."""
+samples and 2 s).  Not chosen on a measurement."""
 
 
 def shape(term) -> sp.Expr:

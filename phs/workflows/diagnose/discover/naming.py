@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 RESEMBLES = 0.8
-"""Cosine between signatures from which a discovered correction is said to resemble a library effect."""
+"""Cosine between signatures from which a discovered correction is said to resemble a library effect.
+Not chosen on a measurement."""
 
 
 def explained_share(reference, h, data, noise: dict) -> float:

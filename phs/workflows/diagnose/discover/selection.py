@@ -28,16 +28,18 @@ import numpy as np
 from phs.workflows.diagnose.discover.dictionary import Discovered, Term, dictionary
 
 SCREEN_TOP = 3
-"""Terms fitted by output error at each forward step (the best screened ones)."""
+"""Terms fitted by output error at each forward step (the best screened ones).  Not chosen on a measurement."""
 MAX_TERMS = 3
-"""Most terms a discovered correction holds."""
+"""Most terms a discovered correction holds.  Not chosen on a measurement."""
 MAX_SAMPLES = 5000
 """Training samples the forward selection fits on (the first ones; the chosen terms are then refitted on
-the whole recording)."""
+the whole recording).  Not chosen on a measurement."""
 NEGLIGIBLE = 1e-6
-"""A coefficient at most this large (in units of its state's scale) after the joint refit: the term is dropped."""
+"""A coefficient at most this large (in units of its state's scale) after the joint refit: the term is dropped.
+A numerical floor, not a measurement."""
 NUDGE = 0.02
-"""Coefficient used to measure a term's output sensitivity (the terms are scaled so 1 is a typical size)."""
+"""Coefficient used to measure a term's output sensitivity (the terms are scaled so 1 is a typical size).
+Not chosen on a measurement."""
 
 
 @dataclass

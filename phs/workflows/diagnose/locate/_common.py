@@ -9,9 +9,10 @@ import scipy.fft as sfft
 from scipy import signal
 
 N_SURROGATES = 100
-"""Noise surrogates per channel for the significance thresholds."""
+"""Noise surrogates per channel for the significance thresholds.  Not chosen on a measurement."""
 NULL_QUANTILE = 0.99
-"""Quantile of the surrogates' best value used as the significance threshold."""
+"""Quantile of the surrogates' best value used as the significance threshold.
+A convention (1 % false alarms per test), not a measurement."""
 
 
 def _disp(key: str) -> str:
