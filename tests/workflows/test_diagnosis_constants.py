@@ -1,7 +1,8 @@
 """The diagnosis' constants: one table lists them all, and none is justified by a held-out case.
 
 ``docs/reference/diagnosis_constants.md`` holds one row per UPPER_CASE numeric module constant of
-``phs/workflows/diagnose/`` (its sub-packages ``discover/`` and ``locate/`` included): a number, or a
+``phs/workflows/diagnose/`` (its sub-packages ``discover/`` and ``locate/`` included) and of any
+``phs/workflows/discover*/``: a number, or a
 tuple or dict of numbers.  The row names the constant and its module and shows its current value as
 :func:`_shown` writes it, so a constant added, removed or changed without the table fails here.
 
@@ -54,7 +55,9 @@ def _shown(v) -> str:
 def _module_constants():
     """(module, name, value, docstring) of every UPPER_CASE module-level assignment under the package."""
     out = []
-    for path in sorted(PACKAGE.rglob("*.py")):
+    # the discovery lives in diagnose/discover/; a discover* package beside diagnose/ would be walked too
+    paths = sorted(PACKAGE.rglob("*.py")) + sorted(p for d in PACKAGE.parent.glob("discover*") for p in d.rglob("*.py"))
+    for path in paths:
         tree = ast.parse(path.read_text(encoding="utf-8"))
         module = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
         for k, node in enumerate(tree.body):

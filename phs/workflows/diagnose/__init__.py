@@ -24,6 +24,7 @@ The parts, each importing only those listed after it: :mod:`~phs.workflows.diagn
 :mod:`~phs.workflows.diagnose.report` (words, figures, JSON and HTML),
 :mod:`~phs.workflows.diagnose.mismatch` (noise level, model signals, located mismatch),
 :mod:`~phs.workflows.diagnose.ranking` (scores, acceptance, choice),
+:mod:`~phs.workflows.diagnose.calibration` (the confidence's calibration, cross-validated on the stored diagnoses),
 :mod:`~phs.workflows.diagnose.hypotheses` (fitting one model, never worse than its neutral point),
 :mod:`~phs.workflows.diagnose.retry` (retrying a failing fit), :mod:`~phs.workflows.diagnose.locate` and
 :mod:`~phs.workflows.diagnose.discover` (corrections outside the library).
