@@ -35,7 +35,7 @@ import math
 from collections.abc import Sequence
 
 from components import CosseratRod, HydrogelActuator
-from phs import Measured, PHSystem, interconnect, series, symbol_of_state
+from phs import Measured, Param, PHSystem, interconnect, series, symbol_of_state
 from phs.errors import ModelError
 
 LENGTH, WIDTH, THICKNESS = 0.045, 0.011, 0.0045  # m
@@ -67,7 +67,9 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
     tau : float
         Kelvin–Voigt retardation time of the backbone [s].
     lever : float or (float, float)
-        Effective lever arm of the SVA tension [m], or one per row ``(upper, lower)``.
+        Effective lever arm of the SVA tension [m], or one per row ``(upper, lower)``; a row's lever arm
+        may be a :class:`~phs.Param` (positive), then one parameter shared by the row's SVAs (the lower
+        row's SVAs take its negative), as a fit of the rows needs.
     gravity : bool
         Include the buoyant weight in water.
     E : float, optional
@@ -89,6 +91,9 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
     >>> two = hydrogel_arm(per_segment=1, svas=[1, 9], lever=(2e-4, 3e-4))
     >>> two.param("sva1.r").value, two.param("sva9.r").value
     (0.0002, -0.0003)
+    >>> rows = hydrogel_arm(per_segment=1, svas=[1, 9], lever=(Param("r_up", 2e-4, "m"), Param("r_lo", 3e-4, "m")))
+    >>> [p for p in rows.param_names if p.endswith("r") or p.startswith("r_")]
+    ['r_up', 'r_lo']
     """
     bad = [i for i in svas if not (isinstance(i, int) and 1 <= i <= 16)]
     if bad or len(set(svas)) != len(svas):
@@ -96,8 +101,12 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
     if not isinstance(per_segment, int) or per_segment < 1:
         raise ModelError(f"hydrogel_arm: per_segment must be a positive integer, got {per_segment!r}")
     levers = tuple(lever) if isinstance(lever, (tuple, list)) else (lever, lever)
-    if len(levers) != 2 or not all(isinstance(r, (int, float)) and r > 0 for r in levers):
-        raise ModelError(f"hydrogel_arm: lever must be a positive number or a pair (upper, lower) of them; got {lever!r}")
+    if len(levers) != 2 or not all(isinstance(r, (int, float, Param)) and ((r.value or 0.0) if isinstance(r, Param) else r) > 0
+                                   for r in levers):
+        raise ModelError(f"hydrogel_arm: lever must be a positive number or a pair (upper, lower) of positive numbers "
+                         f"or Params; got {lever!r}")
+    shared = [r for r in levers if isinstance(r, Param)]
+    levers = tuple(r.symbol if isinstance(r, Param) else r for r in levers)
     m = per_segment
     segments = sorted({(i - 1) % SEGMENTS + 1 for i in svas})
     spans = [((j - 1) * m, j * m) for j in segments]
@@ -113,7 +122,7 @@ def hydrogel_arm(per_segment: int = 2, svas: Sequence[int] = tuple(range(1, 17))
                 members.append(f"sva{i}.c")
         conns.append(series(f"rod.c{a}_{b}", *members))
     tip = Measured("tip", 1e3 * symbol_of_state(f"rod.uy{SEGMENTS * m}"), "mm", "tip deflection across the backbone")
-    return interconnect("hydrogel_arm", comps, conns, measured=[tip],
+    return interconnect("hydrogel_arm", comps, conns, params=shared, measured=[tip],
                         description="Hydrogel continuum arm (Doroudchi et al.): Cosserat backbone bent by hydrogel SVAs")
 
 

@@ -4,9 +4,14 @@ Table I, and the lever arms fitted to the table.
 Each case drives a set of SVAs with one 15 s voltage pulse (Sec. V-B: "square signals of voltage ... all
 applied for 15 seconds"); the table reports the tip's range ``|X| = X_max - X_min`` [mm] during the test
 and the RMSE of the paper's simulation.  :func:`case_ranges` simulates the eight cases on one arm carrying
-all 16 SVAs (the idle ones are present, as on the robot) for 40 s each and returns the eight ranges;
-:func:`fit_levers` fits the lever arms of the two rows to them by least squares over the relative errors
-(the paper normalises each case's error by its ``|X|``: its RMSE are 5-9 % of ``|X|``).
+all 16 SVAs (the idle ones are present, as on the robot) for 40 s each and returns the eight ranges.
+:func:`fit_levers` fits the lever arms of the two rows to them through :func:`phs.identify`: the table is
+eight runs known by one statistic each (:func:`table_summaries`: the run's inputs, a 15 s pulse in a 40 s
+run, and the measured ``range(tip)``), fitted as relative errors (the paper normalises each case's error by
+its ``|X|``: its RMSE are 5-9 % of ``|X|``) on :func:`table_arm`, whose rows' lever arms are two shared
+parameters ``r_upper`` and ``r_lower``.  :func:`fit_levers_least_squares` is the same fit computed
+independently (scipy's least squares over :func:`case_ranges`, finite-difference Jacobian), the check of
+the identification route.
 
 :func:`eq7_readings` enumerates the readings of the garbled eq. 7 and of Table I (bracket sign, where the
 time multiplies, the prefactor, which pair of Table I belongs to which ``b_i`` and which member of a pair
@@ -24,7 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from components.hydrogel import TABLE_I
+from phs import Param, PHSystem
 from phs.errors import ParameterError
+from systems.hydrogel_arm import hydrogel_arm
 
 TABLE_II = (
     (1, tuple(range(1, 9)), 1.8, 0.28, 4.09),
@@ -44,6 +51,65 @@ FITTED = {"V_t": 1.08, "levers": (2.93e-5, 4.64e-5)}
 """The lever arms [m] of the upper and the lower row fitted to Table II with eq. 8's time coefficients at
 ``V_t`` [V] (``docs/examples/hydrogel_arm_cases.py``: 95 % intervals [0.0237, 0.0350] mm and
 [0.0401, 0.0527] mm, NRMSE 11.0 %)."""
+LEVER_RANGE = (1e-7, 1e-2)  # m, declared range of the fitted lever arms
+
+
+def table_arm(per_segment: int = 1, V_t: float | None = FITTED["V_t"], levers: tuple[float, float] = FITTED["levers"]) -> PHSystem:
+    """The arm of the Table II cases: all 16 SVAs, the rows' lever arms two shared parameters.
+
+    Parameters
+    ----------
+    per_segment : int
+        Rod elements per segment (1: the reduced arm, 8 rod elements; 2: 16).
+    V_t : float or None
+        Voltage of eq. 8's time coefficients (None: Table I as read, the coefficients at the amplitude).
+    levers : (float, float)
+        Values [m] of ``r_upper`` (SVAs 1-8) and ``r_lower`` (SVAs 9-16; their lever arm is ``-r_lower``).
+
+    Returns
+    -------
+    PHSystem
+
+    Examples
+    --------
+    >>> arm = table_arm()
+    >>> arm.param("r_upper").value, arm.param("r_lower").unit, len(arm.states)
+    (2.93e-05, 'm', 80)
+    """
+    rows = (Param("r_upper", float(levers[0]), "m", "effective lever arm of the upper row's SVAs (1-8)", LEVER_RANGE),
+            Param("r_lower", float(levers[1]), "m", "effective lever arm of the lower row's SVAs (9-16)", LEVER_RANGE))
+    return hydrogel_arm(per_segment=per_segment, V_t=V_t, lever=rows)
+
+
+def table_summaries(t=None) -> list:
+    """Table II as eight :class:`~phs.workflows.identify.Summary` runs: each the run's 16 heater inputs (a
+    15 s pulse of the case's voltage on its SVAs, held between the samples, 0 on the others), the measured
+    ``range(tip)`` [mm] and the case's operating amplitude ``sva{i}.V_a``.
+
+    Parameters
+    ----------
+    t : array, optional
+        Time grid [s] (default 0..40 s at 10 Hz).
+
+    Returns
+    -------
+    list of Summary
+
+    Examples
+    --------
+    >>> cases = table_summaries()
+    >>> cases[3].name, cases[3].measured, cases[3].params["sva1.V_a"], len(cases[3].recording.t)
+    ('case4', {'range(tip)': 13.06}, 3.6, 401)
+    """
+    import phs  # the workflows' door: phs.Summary, phs.Recording (systems import no workflow module)
+
+    t = np.linspace(0.0, DURATION, int(DURATION * 10) + 1) if t is None else np.asarray(t, dtype=float)
+    out = []
+    for case, svas, V, _, measured in TABLE_II:
+        u = {f"V{i}": np.where(t < PULSE, V, 0.0) if i in svas else np.zeros(len(t)) for i in range(1, 17)}
+        rec = phs.Recording.from_arrays(t, u, source=f"Table II case {case}", holds=dict.fromkeys(u, "zoh"))
+        out.append(phs.Summary(rec, {"range(tip)": measured}, {f"sva{i}.V_a": V for i in range(1, 17)}, f"case{case}"))
+    return out
 
 
 def case_ranges(sim, levers: tuple[float, float], t=None, params=None) -> np.ndarray:
@@ -90,7 +156,8 @@ def case_ranges(sim, levers: tuple[float, float], t=None, params=None) -> np.nda
 
 @dataclass(frozen=True)
 class LeverFit:
-    """Lever arms fitted to Table II, with 95 % intervals, and the fitted model's eight ranges."""
+    """Lever arms fitted to Table II, with 95 % intervals, and the fitted model's eight ranges
+    (``identification``: the :func:`phs.identify` result, where the fit went through it)."""
 
     levers: tuple[float, float]
     stderr: tuple[float, float]
@@ -98,6 +165,7 @@ class LeverFit:
     correlation: float
     ranges: np.ndarray
     relative_errors: np.ndarray
+    identification: object = None
 
     @property
     def nrmse(self) -> float:
@@ -111,8 +179,51 @@ class LeverFit:
                 f"correlation {self.correlation:+.2f}, NRMSE {100 * self.nrmse:.1f} %")
 
 
-def fit_levers(sim, start: tuple[float, float] = (2.9e-4, 2.9e-4), t=None) -> LeverFit:
-    """Fit the two rows' lever arms to Table II's eight ranges (least squares of the relative errors).
+def fit_levers(arm, start: tuple[float, float] = (2.9e-4, 2.9e-4), t=None, rtol: float = 1e-7) -> LeverFit:
+    """Fit the two rows' lever arms to Table II's eight ranges through :func:`phs.identify`.
+
+    The eight cases are :func:`table_summaries` (each run's inputs and its measured ``range(tip)``), fitted as
+    relative errors (identify's default for summaries) with exact CVODES sensitivities, the lever arms in
+    linear coordinates; the covariance is ``s² (JᵀJ)⁻¹`` over 8 − 2 degrees of freedom and the 95 % intervals
+    use Student's t with 6 degrees of freedom, as in :func:`fit_levers_least_squares`.
+
+    Parameters
+    ----------
+    arm : PHSystem
+        :func:`table_arm` (the rows' lever arms the shared parameters ``r_upper``, ``r_lower``).
+    start : (float, float)
+        Starting lever arms [m].
+    t : array, optional
+        Time grid [s] of the runs (default 0..40 s at 10 Hz).
+    rtol : float
+        Integration tolerance.
+
+    Returns
+    -------
+    LeverFit
+
+    Examples
+    --------
+    On the reduced arm (8 rod elements), from the lever arms of :data:`FITTED` (rounded to 3 digits):
+
+    >>> fit = fit_levers(table_arm(), start=FITTED["levers"])
+    >>> [round(1e6 * r, 1) for r in fit.levers], round(100 * fit.nrmse, 1), fit.identification.dof  # µm, %, t's dof
+    ([29.3, 46.4], 11.0, 6)
+    """
+    import phs  # the workflows' door (systems import no workflow module)
+
+    fit = phs.identify(arm, table_summaries(t), ["r_upper", "r_lower"], initial={"r_upper": start[0], "r_lower": start[1]},
+                       log_scale=(), rtol=rtol)
+    levers = (fit.values["r_upper"], fit.values["r_lower"])
+    se = (fit.std_errors["r_upper"], fit.std_errors["r_lower"])
+    interval = (fit.intervals["r_upper"], fit.intervals["r_lower"])
+    return LeverFit(levers, se, interval, float(fit.correlation[0, 1]), fit.modelled, fit.relative_errors, fit)
+
+
+def fit_levers_least_squares(sim, start: tuple[float, float] = (2.9e-4, 2.9e-4), t=None) -> LeverFit:
+    """The fit of :func:`fit_levers` computed independently: scipy's least squares of the relative errors
+    of :func:`case_ranges` (the arm with per-SVA lever arms, the pulses as :class:`~phs.signals.Piecewise`
+    inputs), its Jacobian by finite differences.
 
     The covariance is ``s² (JᵀJ)⁻¹`` with ``s²`` the residual variance over 8 − 2 degrees of freedom
     and ``J`` the Jacobian of the relative errors (finite differences of :func:`case_ranges`); the 95 %
@@ -128,7 +239,7 @@ def fit_levers(sim, start: tuple[float, float] = (2.9e-4, 2.9e-4), t=None) -> Le
     ...         driven = [int(k[1:]) for k, v in u.items() if not isinstance(v, float)]
     ...         tip = sum(params[f"sva{i}.r"] * params[f"sva{i}.V_a"] * (8.5 - (i - 1) % 8) for i in driven)
     ...         return {"tip": 1e3 * tip * np.asarray(t) / t[-1]}
-    >>> fit = fit_levers(Linear(), start=(0.1, 0.1))
+    >>> fit = fit_levers_least_squares(Linear(), start=(0.1, 0.1))
     >>> [round(1e6 * r, 2) for r in fit.levers], round(100 * fit.nrmse, 1)  # micrometres, per cent
     ([61.54, 93.84], 17.3)
     """
@@ -236,5 +347,6 @@ def eq7_readings() -> list[Reading]:
     return out
 
 
-__all__ = ["TABLE_II", "MEASURED", "FITTED", "case_ranges", "fit_levers", "LeverFit", "Reading", "reading_force", "eq7_readings",
+__all__ = ["TABLE_II", "MEASURED", "FITTED", "case_ranges", "table_arm", "table_summaries", "fit_levers",
+           "fit_levers_least_squares", "LeverFit", "Reading", "reading_force", "eq7_readings",
            "AS_FIXED", "PULSE", "DURATION"]

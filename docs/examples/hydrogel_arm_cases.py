@@ -1,8 +1,10 @@
 # %% [markdown]
 # The hydrogel arm against Table II of Doroudchi et al.: the eight open-loop cases (15 s pulses, 40 s runs)
 # simulated and compared with the measured tip ranges; the readings of eq. 7 and Table I checked against
-# what the paper says of the force; the lever arms of the two rows fitted to the table with 95 % intervals;
-# the water drag of eq. 5 and the buoyant weight measured for what they change.
+# what the paper says of the force; the lever arms of the two rows fitted to the table with 95 % intervals
+# through phs.identify (each case a run known by one statistic, its tip range), checked against the same fit
+# by scipy's least squares over the simulated ranges; the water drag of eq. 5 and the buoyant weight
+# measured for what they change.
 # Run: python docs/examples/hydrogel_arm_cases.py [--quick] [--out DIR]
 # (--quick: 8 rod elements, 64 states; default: 16 rod elements, the 128-state arm, and both compared)
 
@@ -20,7 +22,16 @@ import numpy as np  # noqa: E402
 from codegen import simulator  # noqa: E402
 from phs.signals import Piecewise  # noqa: E402
 from systems.hydrogel_arm import LEVER, hydrogel_arm  # noqa: E402
-from systems.hydrogel_cases import AS_FIXED, MEASURED, TABLE_II, case_ranges, eq7_readings, fit_levers  # noqa: E402
+from systems.hydrogel_cases import (  # noqa: E402
+    AS_FIXED,
+    MEASURED,
+    TABLE_II,
+    case_ranges,
+    eq7_readings,
+    fit_levers,
+    fit_levers_least_squares,
+    table_arm,
+)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ap = argparse.ArgumentParser(description="The hydrogel arm against Table II of Doroudchi et al.")
@@ -36,6 +47,25 @@ wall = time.perf_counter()
 def trends(x):
     """Voltage ratios (3.6 V / 1.8 V, upper and lower row) and row ratios (lower / upper, 1.8 V and 3.6 V)."""
     return x[1] / x[0], x[3] / x[2], x[2] / x[0], x[3] / x[1]
+
+
+def both_routes(label, V_t, sim, start):
+    """The lever arms fitted through phs.identify and by least squares over case_ranges, timed and compared."""
+    t0 = time.perf_counter()
+    arm = table_arm(M, V_t=V_t)
+    t1 = time.perf_counter()
+    fit = fit_levers(arm, start=start)
+    t2 = time.perf_counter()
+    lsq = fit_levers_least_squares(sim, start=start)
+    t3 = time.perf_counter()
+    print(f"  {label} fit: {fit}   (phs.identify, {fit.identification.iterations} evaluations, {t2 - t1:.1f} s; "
+          f"arm built in {t1 - t0:.1f} s)")
+    print(f"  least squares over case_ranges: {lsq}   ({t3 - t2:.1f} s)")
+    print(f"  identify and least squares: lever arms differ by at most "
+          f"{np.max(np.abs(np.array(fit.levers) / lsq.levers - 1)):.2e}, standard errors by at most "
+          f"{np.max(np.abs(np.array(fit.stderr) / lsq.stderr - 1)):.2e}, interval ends by at most "
+          f"{np.max(np.abs(np.ravel(fit.interval) - np.ravel(lsq.interval))) / min(lsq.stderr):.2e} standard errors")
+    return fit
 
 
 def show(label, x):
@@ -69,16 +99,14 @@ print(f"{'case':<34}" + "".join(f"{c:7d}" for c, *_ in TABLE_II))
 show("Table II, measured |X| [mm]", MEASURED)
 x_i = case_ranges(sim_i, (LEVER, LEVER))
 show(f"Table I, r = {1e3 * LEVER} mm", x_i)
-fit_i = fit_levers(sim_i, start=(LEVER, LEVER))
+fit_i = both_routes("Table I", None, sim_i, (LEVER, LEVER))
 show("Table I, levers fitted", fit_i.ranges)
-print(f"  Table I fit: {fit_i}")
 
 # %% 3. eq. 8's time coefficients at 1.08 V for every amplitude: the lever arms fitted
 t0 = time.perf_counter()
 sim_t = simulator(hydrogel_arm(per_segment=M, V_t=V_T), rtol=1e-7)
-fit_t = fit_levers(sim_t, start=(4e-5, 6e-5))
+fit_t = both_routes(f"V_t = {V_T} V", V_T, sim_t, (4e-5, 6e-5))
 show(f"b1, b2 at {V_T} V, levers fitted", fit_t.ranges)
-print(f"  V_t = {V_T} V fit: {fit_t}   ({time.perf_counter() - t0:.0f} s)")
 print("  relative errors per case [%]: " + " ".join(f"{100 * e:+.1f}" for e in fit_t.relative_errors))
 
 # %% 4. The water drag of eq. 5 (C = 0.0262 kg/m**2, on by default): the cases without it

@@ -149,8 +149,9 @@ def is_summaries(data) -> bool:
 class SummaryFit(IdentificationResult):
     """:class:`IdentificationResult` of a fit to summary statistics: one row per statistic of a run.
 
-    ``rows`` lists ``(run, label)``; ``measured`` and ``modelled`` the statistics (model units); ``fit_percent``
-    and ``residuals`` are per label over the runs; :attr:`relative_errors` is ``modelled / measured - 1``.
+    ``rows`` lists ``(run, label)``; ``measured`` and ``modelled`` the statistics (model units); ``residuals``
+    are per label over the runs, and so is ``fit_percent`` (NRMSE fit %) for the labels measured on two runs or
+    more; :attr:`relative_errors` is ``modelled / measured - 1``.
     Intervals use Student's t with ``dof`` degrees of freedom.
     """
 
@@ -165,7 +166,9 @@ class SummaryFit(IdentificationResult):
         return self.modelled / self.measured - 1.0
 
     def summary(self) -> str:
-        lines = [super().summary(), f"  95 % intervals: Student's t, {self.dof} degrees of freedom"]
+        rel = self.relative_errors
+        lines = [super().summary(), f"  95 % intervals: Student's t, {self.dof} degrees of freedom",
+                 f"  RMS of the relative errors: {100 * float(np.sqrt(np.mean(rel**2))):.2f} % over {len(rel)} statistics"]
         for (run, label), m, y in zip(self.rows, self.measured, self.modelled, strict=True):
             lines.append(f"  {run} {label}: measured {m:.6g}, model {y:.6g} ({100 * (y / m - 1) if m else np.nan:+.1f} %)")
         return "\n".join(lines)
@@ -342,7 +345,7 @@ def identify_summaries(system, summaries, free, *, bounds=None, x0=None, weights
     return SummaryFit(
         system=system, free=free, values=values, initial={k: float(system.param(k).value) for k in free},
         std_errors=std, intervals=intervals, correlation=corr, flagged_pairs=flagged,
-        fit_percent={lab: nrmse_fit(measured[i], modelled[i]) for lab, i in by.items()}, validation_fit_percent={},
+        fit_percent={lab: nrmse_fit(measured[i], modelled[i]) for lab, i in by.items() if len(i) > 1}, validation_fit_percent={},
         residuals={lab: measured[i] - modelled[i] for lab, i in by.items()}, cost=float(sol.cost),
         iterations=int(sol.nfev), seconds=_time.perf_counter() - wall, x0=x0v, outputs=labels,
         weights={f"{run}:{label}": float(wk) for (run, label, *_), wk in zip(rows, w, strict=True)},
