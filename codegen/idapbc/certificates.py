@@ -47,6 +47,15 @@ from phs._json import jsonable as _jsonable
 from phs._results import ResultMixin, draw_verdicts, finish, panels, require_pandas
 from phs.errors import PHSError
 
+RUN_STEPS = 5000
+"""CVODES's limit of internal steps per output interval (1/400 of the horizon) in the certificate's closed-loop
+runs.  A run that needs more is counted as failed, saying so: near x* the closed loop takes a few tens of steps
+per interval; a start where it is thousands of times faster (e.g. against the steep wall of a material spring)
+would otherwise run for hours."""
+
+RUN_SECONDS = 30.0
+"""CPU seconds allowed to one certificate run (a second bound, for runs whose steps are slow rather than many)."""
+
 
 @dataclass(frozen=True)
 class Certificate:
@@ -494,7 +503,7 @@ def _simulations(ctrl, data, c, k, horizon, seed) -> Certificate:
     worst_inc, worst_dist, fails, elsewhere = 0.0, 0.0, [], []
     for x, hd in starts:
         try:
-            res = simulate_closed_loop(ctrl, t, x0=x, rtol=1e-10)
+            res = simulate_closed_loop(ctrl, t, x0=x, rtol=1e-10, max_steps=RUN_STEPS, seconds=RUN_SECONDS)
         except PHSError as exc:
             fails.append(str(exc).splitlines()[0][:200])
             continue

@@ -192,9 +192,121 @@ def _plant_setup(ctrl, plant, params):
     return plant, p, idx
 
 
+def start_state(ctrl, plant=None, x0=None, params: dict | None = None) -> tuple[np.ndarray, str]:
+    """The plant state a closed-loop run starts from, and the states a load moved, in words (else ``""``).
+
+    Without ``x0``: each plant state at its declared rest (``StateInfo.initial``, the default of the open-loop
+    :func:`codegen.simulate`), the controller's states at the design's ``x0`` (the same unless one was given to
+    :func:`codegen.idapbc.design`).  When that state is not at rest under the inputs held constant (the
+    uncontrolled inputs at their fixed values, the controlled ones at 0 moved into their ranges), e.g. a model
+    under a weight or a preload, the run starts at the equilibrium the plant settles at under them, on the leaf
+    of its conserved quantities: Newton's method on the generated functions when it finds a stable
+    equilibrium, else :func:`phs.equilibrium`; when neither finds one the declared rest is kept.  A dict
+    ``x0`` replaces those values for the states it names; an array gives every state.  ``phs control
+    --t-end`` starts from the same state.
+
+    Parameters
+    ----------
+    ctrl : Controller
+    plant : PHSystem, optional
+        Default: the controller's model.
+    x0 : dict or array, optional
+    params : dict, optional
+        Plant parameter overrides.
+
+    Returns
+    -------
+    x : numpy array
+        One value per plant state.
+    loaded : str
+        ``"name=value, ..."`` of the states where the load holds them, or ``""``.
+
+    Raises
+    ------
+    InputDataError
+        For an ``x0`` naming no plant state, a value that is not a finite number, or an array of the wrong length.
+
+    Examples
+    --------
+    >>> from codegen.idapbc import design
+    >>> from components import Damper, ForceSource, LinearSpring, Mass
+    >>> from phs import interconnect, series
+    >>> plant = interconnect("msd", [ForceSource("F"), Mass("m", m=1.0), LinearSpring("k", K=4.0, L0=0.3),
+    ...                              Damper("b", b=0.4)], [series("F", "m", "k", "b")])
+    >>> ctrl = design(plant, {"k.l": 0.5})
+    >>> start_state(ctrl)[0].tolist(), start_state(ctrl, x0={"m.p": 0.1})[0].tolist()
+    ([0.0, 0.3], [0.1, 0.3])
+    >>> start_state(ctrl, x0={"k.l": float("nan")})
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: x0: value nan of state 'k.l' is not a finite number
+    """
+    plant, p, idx = _plant_setup(ctrl, plant, params)
+    return _start(ctrl, plant, p, idx, x0)
+
+
+def _start(ctrl, plant, p, idx, x0) -> tuple[np.ndarray, str]:
+    if x0 is not None and not isinstance(x0, dict):
+        return state_vector(plant, x0), ""
+    given = dict(x0 or {})
+    xg = state_vector(plant, given)  # checks the names and values
+    xs = state_vector(plant, None)
+    xs[idx] = ctrl.x0
+    loaded = ""
+    if len(given) < len(plant.states):
+        rest = _rest(ctrl, plant, p, xs)
+        if rest is not None:
+            xs = rest
+            loaded = ", ".join(f"{nm}={v:.4g}" for nm, v in zip(plant.state_names, xs) if nm not in given)
+    for nm in given:
+        k = plant.state_names.index(nm)
+        xs[k] = xg[k]
+    return xs, loaded
+
+
+def _rest(ctrl, plant, p, xs) -> np.ndarray | None:
+    """The equilibrium a loaded plant settles at from ``xs`` without control (None when ``xs`` is at rest or
+    none is found); see :func:`start_state`."""
+    from codegen.idapbc.leaf import Leaf
+    from codegen.idapbc.model import Numeric
+    from codegen.idapbc.target import _Solver
+    from phs.equilibria import equilibrium
+    from phs.errors import EquilibriumError
+
+    fixed = {nm: float(ctrl.u_base[j]) for j, nm in enumerate(ctrl.system.input_names) if j not in ctrl.ctrl}
+    u = np.array([(0.0 if info.range is None else min(max(0.0, info.range[0]), info.range[1]))
+                  if info.name in ctrl.input_names else fixed.get(info.name, 0.0) for info in plant.inputs])
+    typical = np.array([st.typical for st in plant.states])
+    xdot = np.asarray(generate(plant).rhs(xs, u, p), dtype=float).reshape(-1)
+    if np.all(np.isfinite(xdot)) and np.all(np.abs(xdot) <= 1e-9 * typical):  # at rest (rates over 1e-9 scales/s)
+        return None
+    rest = None
+    try:
+        num = Numeric(plant, dict(zip(plant.param_names, p)))
+        leaf = Leaf(num.struct_function, num.scale, xs)
+        sol = _Solver(num, leaf, [], [], u, [])
+        xr = sol.newton(xs, np.zeros(0), None, with_targets=False)[0]
+        A, _ = num.jac(xr, u)
+        S = leaf.S(xr)
+        AF = (A[:, leaf.free] + (A[:, leaf.dep] @ S if leaf.dep else 0.0))[leaf.free]
+        if (not num.violated(xr, u)) and (AF.size == 0 or np.max(np.linalg.eigvals(AF).real) < 0):
+            rest = xr
+    except (EquilibriumError, np.linalg.LinAlgError, ArithmeticError):
+        rest = None
+    if rest is None:  # an unstable or no equilibrium near the declared rest: follow the dynamics (pseudo-transient)
+        try:
+            rest = equilibrium(plant, u=u, x0=xs, params=dict(zip(plant.param_names, p))).x
+        except (EquilibriumError, ArithmeticError):
+            return None
+    rest = np.asarray(rest, dtype=float)
+    if not (np.all(np.isfinite(rest)) and np.any(np.abs(rest - xs) > 1e-9 * typical)):
+        return None
+    return np.where(np.abs(rest) < 1e-12 * typical, 0.0, rest)  # rounding noise: 0
+
+
 def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = None, xi0=None,
                          saturate: bool = False, rtol: float = 1e-9, atol: float | None = None,
-                         max_steps: int = 200000) -> ClosedLoopResult:
+                         max_steps: int = 200000, seconds: float | None = None) -> ClosedLoopResult:
     """Simulate ``plant`` (default: the controller's own model) under the controller on the grid ``t``.
 
     Parameters
@@ -203,8 +315,12 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     t : array
         Increasing output times.
     x0 : dict or array, optional
-        Plant initial state (default: the controller's ``x0``; the plant's other states at zero clipped
-        into their ranges).
+        Plant initial state: ``{state: value}`` (the other states as by default) or one value per plant
+        state.  Default (:func:`start_state`): the state the plant rests in before the controller acts, the
+        same as ``phs control --t-end`` starts from: each state at its declared rest (the default of the
+        open-loop :func:`codegen.simulate`), the controller's states at the design's ``x0``, and, when that
+        state is not at rest under the inputs held constant (a weight, a preload), the equilibrium the plant
+        settles at.
     plant : PHSystem, optional
         The plant, e.g. the full model when the design neglected storages.
     params : dict, optional
@@ -215,6 +331,12 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
         Clip the controlled inputs into their declared ranges (otherwise they are only reported).
     rtol, atol : float
         CVODES tolerances (``atol`` on states scaled by their typical magnitudes; default ``rtol / 100``).
+    max_steps : int
+        CVODES's limit of internal steps per output interval.
+    seconds : float, optional
+        Limit of the integration in CPU seconds of this process (enforced in the main thread; elsewhere
+        none): a run still integrating then stops with a :class:`~phs.errors.SimulationError` saying so.
+        The certificates' runs use :data:`codegen.idapbc.certificates.RUN_SECONDS` and ``RUN_STEPS``.
 
     Returns
     -------
@@ -222,10 +344,33 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
 
     Raises
     ------
+    InputDataError
+        For an ``x0`` naming no plant state, a value that is not a finite number (the state named), an array
+        of the wrong length, or a start outside the validity domain.
     DomainError
         When the plant leaves its validity domain (time, condition and state named).
     SimulationError
         When the integrator fails.
+
+    Examples
+    --------
+    A spring of rest length 0.3 m (its declared rest) stretched to 0.5 m; the run starts at rest, ``H_d`` never
+    increases, and ``x0`` by name or as an array are the same start:
+
+    >>> import numpy as np
+    >>> from codegen.idapbc import design
+    >>> from components import Damper, ForceSource, LinearSpring, Mass
+    >>> from phs import interconnect, series
+    >>> plant = interconnect("msd", [ForceSource("F"), Mass("m", m=1.0), LinearSpring("k", K=4.0, L0=0.3),
+    ...                              Damper("b", b=0.4)], [series("F", "m", "k", "b")])
+    >>> ctrl = design(plant, {"k.l": 0.5}, stiffness={"k.l": 6.0}, damping=2.0)
+    >>> res = simulate_closed_loop(ctrl, np.linspace(0, 10, 201))
+    >>> res.x[0].tolist(), round(float(res["k.l"][-1]), 4), res.max_increase("H_d") <= 1e-9
+    ([0.0, 0.3], 0.5, True)
+    >>> a = simulate_closed_loop(ctrl, [0, 1], x0={"k.l": 0.2})
+    >>> b = simulate_closed_loop(ctrl, [0, 1], x0=[0.0, 0.2])
+    >>> bool(np.array_equal(a.x, b.x))
+    True
     """
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or len(t) < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
@@ -235,11 +380,7 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     fn = generate(plant)
     sx = fn.sx
     n, m = len(plant.states), len(plant.inputs)
-    if x0 is None:
-        xs = state_vector(plant, None)
-        xs[idx] = ctrl.x0
-    else:
-        xs = state_vector(plant, x0)
+    xs, loaded = _start(ctrl, plant, p, idx, x0)
     nxi = ctrl.n_xi
     xi_start = np.zeros(nxi) if xi0 is None else np.asarray(xi0, dtype=float).reshape(nxi)
     s = np.array([st.typical for st in plant.states])
@@ -275,8 +416,19 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
             "disable_internal_warnings": True, "quad_err_con": True}
     F = ca.integrator("closed_loop", "cvodes", dae, float(t[0]), list(t[1:]), opts)
     z0 = np.concatenate([xs / s, xi_start / s_xi])
+    if x0 is not None and plant.conditions:  # a start given outside the validity domain: said before any run
+        u0 = np.asarray(ca.Function("u0", [Z], [U])(z0), dtype=float).reshape(-1)
+        g0 = np.asarray(fn.conditions(xs, u0, p), dtype=float).reshape(-1)
+        bad = [c.label for c, v in zip(plant.conditions, g0) if not (v >= -1e-12)]
+        if bad:
+            raise InputDataError(f"x0 is outside the validity domain of {plant.name!r}: {'; '.join(bad)}")
     try:
-        out = F(x0=z0)
+        out = _timed(lambda: F(x0=z0), seconds)
+    except _OutOfTime:
+        raise SimulationError(f"closed-loop simulation of {plant.name!r} under {ctrl.name!r} did not finish in "
+                              f"{seconds:g} CPU seconds (t = {t[0]:g}..{t[-1]:g} s from "
+                              + ", ".join(f"{nm}={v:.4g}" for nm, v in list(zip(plant.state_names, xs))[:4])
+                              + (", ..." if n > 4 else "") + "): the closed loop is too fast or stiff there") from None
     except RuntimeError as exc:
         k, zk = _reached(F, z0, len(t) - 1)  # the last output time the integrator got to, and the state there
         raise SimulationError(describe(exc, plant, t0=float(t[k]), t1=float(t[k + 1]), x=zk[:n] * s, p=p, max_steps=max_steps,
@@ -316,13 +468,45 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     H_cl = H_d.copy()
     if ctrl.integral == "passive":
         H_cl = H_d + 0.5 * np.einsum("ti,ij,tj->t", XIt, ctrl.K_i, XIt)
-    info = {"on_leaf": on_leaf, "input_ranges": {}, "rtol": rtol}
+    info = {"on_leaf": on_leaf, "input_ranges": {}, "rtol": rtol, "loaded": loaded}
     for nm, r in zip(ctrl.input_names, ranges):
         if r is not None:
             col = Ut[:, plant.input_names.index(nm)]
             info["input_ranges"][nm] = {"min": float(col.min()), "max": float(col.max()), "range": list(r),
                                         "exceeded": bool(col.min() < r[0] - 1e-9 * abs(r[0]) or col.max() > r[1] + 1e-9 * abs(r[1]))}
     return ClosedLoopResult(ctrl, plant, t, Xt, XIt, Ut, meas, H_d, H_cl, p, info)
+
+
+class _OutOfTime(Exception):
+    pass
+
+
+def _timed(fn, seconds: float | None):
+    """``fn()`` stopped after ``seconds`` of CPU time by SIGVTALRM (main thread only; elsewhere, or without
+    ``seconds``, no limit).  CasADi turns the handler's exception into its own RuntimeError: a flag tells them
+    apart, and :class:`_OutOfTime` is raised."""
+    import signal
+    import threading
+
+    if seconds is None or threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+        return fn()
+    fired = []
+
+    def handler(signum, frame):
+        fired.append(True)
+        raise _OutOfTime()
+
+    old = signal.signal(signal.SIGVTALRM, handler)
+    signal.setitimer(signal.ITIMER_VIRTUAL, max(float(seconds), 1e-3))
+    try:
+        return fn()
+    except RuntimeError:
+        if fired:
+            raise _OutOfTime() from None
+        raise
+    finally:
+        signal.setitimer(signal.ITIMER_VIRTUAL, 0)
+        signal.signal(signal.SIGVTALRM, old)
 
 
 def _reached(F, z0, n: int) -> tuple[int, np.ndarray]:

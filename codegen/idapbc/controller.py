@@ -67,7 +67,8 @@ def design(system: PHSystem, target: dict, *, inputs=None, fixed_inputs: dict | 
         Values of the other inputs (default 0), e.g. a load force.
     x0 : dict or array, optional
         A state on the leaf of the conserved quantities to regulate on (the curling HASEL at rest:
-        ``{"seg1.l_p": 0.015, ...}``); default zero clipped into the states' ranges.
+        ``{"seg1.l_p": 0.015, ...}``); default: each state at its declared rest (``StateInfo.initial``, the
+        default initial state of :func:`codegen.simulate`).
     params : dict, optional
         Parameter values of the controller's model (overrides).
     neglect : sequence of str
@@ -368,19 +369,47 @@ class Controller:
         """
         return certificates.certify(self, **kw)
 
-    def simulate(self, t, **kw) -> closed_loop.ClosedLoopResult:
+    def simulate(self, t, x0=None, **kw) -> closed_loop.ClosedLoopResult:
         """Closed-loop simulation; see :func:`codegen.idapbc.closed_loop.simulate_closed_loop`.
+
+        Parameters
+        ----------
+        t : array
+            Increasing output times.
+        x0 : dict or array, optional
+            Plant initial state, ``{state: value}`` (the other states as by default) or one value per plant
+            state.  Default: where the plant rests before the controller acts, as ``phs control --t-end``
+            (:func:`codegen.idapbc.closed_loop.start_state`): each state at its declared rest, the default
+            of the open-loop :func:`codegen.simulate` (the design's ``x0`` if one was given), or, under a
+            weight or preload that moves it, the equilibrium the plant settles at.
+        **kw
+            ``plant``, ``params``, ``xi0``, ``saturate``, ``rtol``, ``atol``, ``max_steps`` of
+            :func:`~codegen.idapbc.closed_loop.simulate_closed_loop`.
+
+        Raises
+        ------
+        InputDataError
+            For an ``x0`` naming no state, a value that is not a finite number (the state named), or an
+            array of the wrong length.
 
         Examples
         --------
         >>> import numpy as np
         >>> from systems.examples import mass_spring_damper
         >>> ctrl = design(mass_spring_damper(), {"position": 0.5}, stiffness={"k.l": 6.0}, damping=2.0)
-        >>> res = ctrl.simulate(np.linspace(0, 10, 101))
-        >>> round(float(res["position"][-1]), 4)
-        0.5
+        >>> res = ctrl.simulate(np.linspace(0, 10, 101))          # from the declared rest: k.l = 0, m.p = 0
+        >>> res.x[0].tolist(), round(float(res["position"][-1]), 4)
+        ([0.0, 0.0], 0.5)
+        >>> a = ctrl.simulate([0.0, 1.0], x0={"k.l": 0.2})         # by name ...
+        >>> b = ctrl.simulate([0.0, 1.0], x0=[0.0, 0.2])           # ... or one value per state (m.p, k.l)
+        >>> bool(np.array_equal(a.x, b.x))
+        True
+        >>> ctrl.simulate([0.0, 1.0], x0={"k.l": "far"})
+        Traceback (most recent call last):
+        ...
+        phs.errors.InputDataError: x0: value 'far' of state 'k.l' is not a number
         """
-        return closed_loop.simulate_closed_loop(self, t, **kw)
+        return closed_loop.simulate_closed_loop(self, t, x0=x0, **kw)
 
     def export_c(self, directory, name: str | None = None) -> list[str]:
         """Write the control law as a standalone C source and header; see :func:`codegen.idapbc.export.export_c`.

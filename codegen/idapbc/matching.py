@@ -48,6 +48,14 @@ PDE_SIZE_LIMIT = 120
 handed over, with a time limit (:data:`PDE_SECONDS`); the others are integrated numerically along the leaf
 (sympy's characteristic method on the curling HASEL's geometry does not finish in reasonable time)."""
 
+ANSATZ_UNKNOWNS = 152
+"""Largest number of unknown coefficients of ``H_a`` in the ansatz: the quadratic basis of n states has
+n (n + 3) / 2, so 16 states (152).  Each unknown needs its gradient and a column of the matching equations
+(sympy, n entries), and the collocation evaluates the n x K matrix at 4 K points: about 4 K**2 n entry
+evaluations.  The six-actuator platform (12 states, 90 unknowns) designs in about 5 s; 16 states cost about 4
+times that; the 8384 unknowns of a 128-state rod would take days.  Larger designs are refused in one line before
+any symbolic work (:func:`codegen.idapbc.shaping.desired_structure`)."""
+
 PDE_SECONDS = 10.0
 """Time allowed to ``pdsolve`` and the verification of its solution (enforced in the main thread)."""
 
@@ -321,19 +329,23 @@ def quadratic_basis(x, x_star, names) -> tuple[list[sp.Expr], list[tuple]]:
 def _nullspace(M: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
     if M.size == 0:
         return np.eye(M.shape[1])
-    _, sv, Vt = np.linalg.svd(M)
+    if M.shape[0] >= M.shape[1]:  # the thin SVD has every right singular vector (no m x m U of a tall matrix)
+        _, sv, Vt = np.linalg.svd(M, full_matrices=False)
+    else:
+        _, sv, Vt = np.linalg.svd(M)
     r = int(np.sum(sv > rtol * (sv[0] if sv.size else 1.0)))
     return Vt[r:].T
 
 
 def ansatz(Jd, Rd_match, J_a, R_a, g, f_fix, H, x, x_star, scale, names, *, basis=None, labels=None, user_Ha=None,
-           unknowns=None, stiffness=None, collocation: int = 0, seed: int = 0, kernel=None) -> Structure:
+           unknowns=None, stiffness=None, collocation: int = 0, seed: int = 0, kernel=None, grad_H_star=None) -> Structure:
     """Solve the linear matching equations for the coefficients of ``H_a``; see the module docstring.
 
     ``kernel`` holds rows (scaled coordinates) spanning the complement of the kernel of ``J_d - R_d`` at ``x*``:
     they must annihilate ``grad H_d(x*)``.  ``Rd_match`` is ``R + R_a`` without the damping injection along
     ``g`` (matched by construction); ``f_fix`` the drift of the inputs held constant, which the target must
-    reproduce in the unactuated rows.
+    reproduce in the unactuated rows.  ``grad_H_star``, when given, is ``dH/dx`` at ``x*`` computed elsewhere (the
+    generated functions: a symbolic derivative of a large ``H`` such as an inverse inertia form takes seconds).
     """
     n = len(x)
     A, M = actuated_split(g)
@@ -386,7 +398,7 @@ def ansatz(Jd, Rd_match, J_a, R_a, g, f_fix, H, x, x_star, scale, names, *, basi
     if not symbolic:
         rng = np.random.default_rng(seed)
         npts = collocation or max(4 * K, 40)
-        f_cols = [sp.lambdify([x], col, "numpy") for col in Mcols]
+        f_cols = sp.lambdify([x], sp.Matrix.hstack(*Mcols), "numpy") if K else None  # one function: n x K
         f_b = sp.lambdify([x], b_vec, "numpy")
         f_g = sp.lambdify([x], g, "numpy")
         eqs_M, eqs_b = [], []
@@ -396,7 +408,7 @@ def ansatz(Jd, Rd_match, J_a, R_a, g, f_fix, H, x, x_star, scale, names, *, basi
                 gv = np.asarray(f_g(pt), dtype=float).reshape(n, -1)
                 U, sv, _ = np.linalg.svd(gv)
                 perp = U[:, int(np.sum(sv > 1e-12 * max(sv[0], 1e-300))):].T
-                cols = np.column_stack([np.asarray(f(pt), dtype=float).reshape(n) for f in f_cols]) if K else np.zeros((n, 0))
+                cols = np.asarray(f_cols(pt), dtype=float).reshape(n, K) if K else np.zeros((n, 0))
                 bv = np.asarray(f_b(pt), dtype=float).reshape(n)
             if not (np.all(np.isfinite(cols)) and np.all(np.isfinite(bv))):
                 continue
@@ -417,8 +429,13 @@ def ansatz(Jd, Rd_match, J_a, R_a, g, f_fix, H, x, x_star, scale, names, *, basi
     P = kernel  # rows spanning the complement of the kernel (scaled)
     Gs = np.column_stack([np.asarray(sp.Matrix(gk).xreplace(dict(zip(x, map(sp.Float, x_star)))).evalf(),
                                      dtype=float).reshape(n) for gk in grads]) * scale[:, None] if K else np.zeros((n, 0))
-    gH = np.asarray(sp.Matrix([sp.diff(H + offset, xi) for xi in x]).xreplace(
-        dict(zip(x, map(sp.Float, x_star)))).evalf(), dtype=float).reshape(n) * scale
+    at_star = dict(zip(x, map(sp.Float, x_star)))
+    if grad_H_star is None:
+        gH = np.asarray(sp.Matrix([sp.diff(H + offset, xi) for xi in x]).xreplace(at_star).evalf(), dtype=float)
+    else:
+        gH = np.asarray(grad_H_star, dtype=float) + np.asarray(
+            sp.Matrix([sp.diff(offset, xi) for xi in x]).xreplace(at_star).evalf(), dtype=float).reshape(n)
+    gH = gH.reshape(n) * scale
     c = c0.copy()
     if K and P.shape[0]:
         Aeq = P @ Gs @ Z

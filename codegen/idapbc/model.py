@@ -184,13 +184,16 @@ def input_vector(system: PHSystem, values: dict | None, what: str) -> np.ndarray
 
 
 def state_vector(system: PHSystem, x0=None, what: str = "x0", ignore=()) -> np.ndarray:
-    """Full state vector from ``{name: value}`` or an array, checked; missing states at 0 clipped into their ranges.
+    """Full state vector from ``{name: value}`` or an array, checked; missing states at their declared rest.
+
+    The declared rest (:attr:`phs.params.StateInfo.initial`: a component's rest value, else 0 moved into the
+    state's range) is also the default initial state of :func:`codegen.simulate`.
 
     Parameters
     ----------
     system : PHSystem
     x0 : dict, array or None
-        ``{state: value}`` (names in ``ignore`` are skipped), or one value per state; None gives the default.
+        ``{state: value}`` (names in ``ignore`` are skipped), or one value per state; None gives the declared rest.
     what : str
         How the value is named in error messages.
     ignore : sequence of str
@@ -218,13 +221,22 @@ def state_vector(system: PHSystem, x0=None, what: str = "x0", ignore=()) -> np.n
                 raise InputDataError(f"{what}: system {system.name!r} has no state {k!r}; states: "
                                      f"{', '.join(system.state_names)}")
             try:
-                base[system.state_names.index(k)] = float(v)
+                value = float(v)
             except (TypeError, ValueError):
                 raise InputDataError(f"{what}: value {v!r} of state {k!r} is not a number") from None
-        if not np.all(np.isfinite(base)):
-            raise InputDataError(f"{what}: a value is not finite")
+            if not np.isfinite(value):
+                raise InputDataError(f"{what}: value {v!r} of state {k!r} is not a finite number")
+            base[system.state_names.index(k)] = value
         return base
-    arr = np.asarray(x0, dtype=float).reshape(-1)
-    if arr.shape != base.shape or not np.all(np.isfinite(arr)):
-        raise InputDataError(f"{what}: expected {base.size} finite values for {system.name!r}, got {arr.size}")
+    try:
+        arr = np.asarray(x0, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputDataError(f"{what}: expected a dict by state name or {base.size} numbers for {system.name!r}, "
+                             f"got {type(x0).__name__}") from None
+    if arr.shape != base.shape:
+        raise InputDataError(f"{what}: expected {base.size} values for {system.name!r} "
+                             f"({', '.join(system.state_names[:6])}{', ...' if base.size > 6 else ''}), got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        k = int(np.argmin(np.isfinite(arr)))
+        raise InputDataError(f"{what}: value {float(arr[k])!r} of state {system.state_names[k]!r} is not a finite number")
     return arr

@@ -13,7 +13,15 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
-from codegen.idapbc.matching import Structure, actuated_split, ansatz, electromechanical, electromechanical_applies, quadratic_basis
+from codegen.idapbc.matching import (
+    ANSATZ_UNKNOWNS,
+    Structure,
+    actuated_split,
+    ansatz,
+    electromechanical,
+    electromechanical_applies,
+    quadratic_basis,
+)
 from phs.errors import InputDataError
 
 
@@ -58,6 +66,23 @@ def _check_matched_stiffness(g, JR, stiffness, system, x, xv, scale) -> str:
             return (f"stiffness on {', '.join(map(repr, stiffness))} is not matched: with one input along g(x), "
                     "(J - R)_AA K (x_A - x_A*) leaves the span of g_A(x) as the configuration changes")
     return ""
+
+
+def _check_ansatz_size(system, H_a, unknowns, why: str) -> None:
+    """Refuse, in one line, an ansatz with more than :data:`ANSATZ_UNKNOWNS` unknown coefficients."""
+    n = len(system.states)
+    if H_a is None:
+        k, what = n * (n + 3) // 2, f"the quadratic ansatz in its {n} states has"
+    elif unknowns is not None:
+        k, what = len(list(unknowns)), "your H_a has"
+    else:
+        return  # counted by the ansatz itself; a user's own H_a is small
+    if k > ANSATZ_UNKNOWNS:
+        raise InputDataError(
+            f"{system.name!r} is too large for the symbolic IDA-PBC design: {what} {k} unknown coefficients "
+            f"(symbolic matching equations of {k} x {n} entries), more than the {ANSATZ_UNKNOWNS} designed in bounded "
+            f"time{f' (the electromechanical construction does not apply: {why})' if why else ''}; leave storages out "
+            "with neglect=[...] (--neglect) or give H_a with few unknowns")
 
 
 def desired_structure(system, num, asg, ctrl, u_base, *, structure: str = "auto", damping: float = 0.0,
@@ -157,6 +182,7 @@ def desired_structure(system, num, asg, ctrl, u_base, *, structure: str = "auto"
             raise InputDataError(unmatched)
         st = electromechanical(JR, g, f_fix, H, x, asg.x, list(asg.u[ctrl]), stiffness, system.state_names)
     else:
+        _check_ansatz_size(system, H_a, unknowns, why if structure == "auto" else "")
         Jd = system.J.xreplace(vals) + Ja
         Rd = system.R.xreplace(vals) + Ra
         Mx = _numeric_matrix(Jd - Rd - r * g * g.T, x, asg.x)
@@ -170,7 +196,8 @@ def desired_structure(system, num, asg, ctrl, u_base, *, structure: str = "auto"
             if unknowns is None:  # the symbols that are neither states nor parameters
                 unknowns = sorted(user.free_symbols - set(x), key=str)
         st = ansatz(Jd, Rd, Ja, Ra, g, f_fix, H, x, asg.x, num.scale, system.state_names, basis=basis, labels=labels,
-                    user_Ha=user, unknowns=unknowns, stiffness=stiffness, kernel=P)
+                    user_Ha=user, unknowns=unknowns, stiffness=stiffness, kernel=P,
+                    grad_H_star=np.asarray(num.fn.grad_hamiltonian(asg.x, np.zeros(num.m), num.p), dtype=float).reshape(n))
         if why and structure == "auto":
             st.notes.insert(0, f"ansatz (electromechanical construction not applicable: {why})")
     if r:

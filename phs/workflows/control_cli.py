@@ -184,15 +184,14 @@ def run_control(args: argparse.Namespace) -> int:
         if t is not None:
             bar.to(2)
             bar.stage("closed loop")
-            start, loaded = _plant_x0(ctrl, system, x0, plant_params)
-            res = ctrl.simulate(t, plant=system, params=plant_params, x0=start)
+            res = ctrl.simulate(t, plant=system, params=plant_params, x0=x0 or None)  # default: start_state
         bar.to(len(stages))
     text = ctrl.summary() + "\n" + report.text()
     unreached: list[str] = []
     if res is not None:
         lines = [f"closed loop on {system.name!r}" + (f" with {', '.join(f'{k}={v:g}' for k, v in plant_params.items())}"
                                                       if plant_params else "") + f", {args.t_end:g} s"
-                 + (f" from the loaded rest state ({loaded})" if loaded else "") + ":"]
+                 + (f" from the loaded rest state ({res.info['loaded']})" if res.info["loaded"] else "") + ":"]
         for tg in ctrl.targets:
             e = res.error(tg.name)
             settled = res.settling_time(0.01, tg.name)
@@ -257,57 +256,6 @@ def run_control(args: argparse.Namespace) -> int:
 
 
 _REPORT = ("controller.txt", "certificates.json", "closed_loop.png", "closed_loop.csv")  # --report DIR
-
-
-def _plant_x0(ctrl, system, x0: dict, plant_params: dict | None = None) -> tuple[np.ndarray, str]:
-    """Initial plant state and, when it is the loaded rest state, that state in words (else ``""``).
-
-    The given ``--x0`` values, and for every other state the state the plant rests in without control: the
-    equilibrium under the uncontrolled inputs' values with the controlled inputs at 0 (clipped into their
-    ranges), on the leaf through the design's ``x0``.  A model under a load (a weight, a preload: its
-    declared rest is not at rest at zero input) starts where the load holds it; a model without one starts
-    at its declared rest, as before.  When that equilibrium cannot be found the declared rest is kept.
-    """
-    from codegen.idapbc import state_vector
-    from phs import equilibrium
-    from phs.errors import EquilibriumError
-
-    xs = state_vector(system, None)
-    for nm, v in zip(ctrl.system.state_names, ctrl.x0):
-        xs[system.state_names.index(nm)] = v
-    for nm in x0:
-        if nm not in system.state_names:
-            raise InputDataError(f"--x0: system {system.name!r} has no state {nm!r}")
-    loaded = ""
-    if len(x0) < len(system.state_names):
-        base = {nm: float(ctrl.u_base[j]) for j, nm in enumerate(ctrl.system.input_names) if j not in ctrl.ctrl}
-        u = {}
-        for info in system.inputs:
-            zero = 0.0 if info.range is None else min(max(0.0, info.range[0]), info.range[1])
-            u[info.name] = zero if info.name in ctrl.input_names else base.get(info.name, 0.0)
-        typical = np.array([st.typical for st in system.states])
-        rest = xs
-        if _moves(system, xs, u, plant_params, typical):  # only a loaded rest needs the solver
-            try:
-                rest = equilibrium(system, u=u, x0=dict(zip(system.state_names, xs)), params=plant_params or None).x
-            except (EquilibriumError, ArithmeticError):
-                rest = xs
-        if np.all(np.isfinite(rest)) and np.any(np.abs(rest - xs) > 1e-9 * typical):
-            xs = np.where(np.abs(rest) < 1e-12 * typical, 0.0, np.asarray(rest, dtype=float))  # rounding noise: 0
-            loaded = ", ".join(f"{nm}={v:.4g}" for nm, v in zip(system.state_names, xs) if nm not in x0)
-    for nm, v in x0.items():
-        xs[system.state_names.index(nm)] = v
-    return xs, loaded
-
-
-def _moves(system, x, u: dict, params: dict | None, typical) -> bool:
-    """Whether the state ``x`` under the constant inputs ``u`` is not at rest: some rate, over its state's
-    typical size, above 1e-9 per second."""
-    from codegen.functions import generate
-
-    uv = np.array([u.get(nm, 0.0) for nm in system.input_names], dtype=float)
-    xdot = np.asarray(generate(system).rhs(x, uv, system.param_vector(params or None)), dtype=float).reshape(-1)
-    return bool(np.any(~np.isfinite(xdot)) or np.any(np.abs(xdot) > 1e-9 * typical))
 
 
 def _png(res) -> bytes:
