@@ -62,7 +62,7 @@ Examples
 from __future__ import annotations
 
 from codegen.idapbc.certificates import Certificate, CertificateReport, certify
-from codegen.idapbc.closed_loop import ClosedLoopResult, simulate_closed_loop
+from codegen.idapbc.closed_loop import ClosedLoopResult, simulate_closed_loop, start_state
 from codegen.idapbc.controller import Controller, design
 from codegen.idapbc.export import export_c
 from codegen.idapbc.leaf import Leaf
@@ -85,7 +85,7 @@ __all__ = [
     "Target", "Assignment", "assign", "resolve_targets",
     "Structure", "actuated_split", "ansatz", "electromechanical", "electromechanical_applies", "quadratic_basis",
     "closed_loop_modes", "static_gain", "leaf_hessian", "integral_gain",
-    "ClosedLoopResult", "simulate_closed_loop",
+    "ClosedLoopResult", "simulate_closed_loop", "start_state",
     "Certificate", "CertificateReport", "certify",
     "export_c",
 ]

@@ -35,7 +35,8 @@ class ClosedLoopResult(ResultMixin):
     ``res["tip"]``, ``res["seg1.theta"]``, ``res["U"]``, ``res["H_d"]`` (desired energy minus its value at
     the assigned equilibrium), ``res["H_cl"]`` (the closed loop's storage: ``H_d`` plus the integrator's
     ``xi^T K_i xi / 2`` with passive integral action), ``res["xi"]``; :meth:`plot` draws the run,
-    :meth:`to_pandas` gives a DataFrame indexed by time.
+    :meth:`to_pandas` gives a DataFrame indexed by time.  ``info["loaded"]`` names the states a load moved
+    from their declared rest at the start (``""`` otherwise; see :func:`start_state`).
 
     Examples
     --------

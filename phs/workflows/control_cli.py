@@ -258,6 +258,14 @@ def run_control(args: argparse.Namespace) -> int:
 _REPORT = ("controller.txt", "certificates.json", "closed_loop.png", "closed_loop.csv")  # --report DIR
 
 
+def _plant_x0(ctrl, system, x0: dict, plant_params: dict | None = None) -> tuple[np.ndarray, str]:
+    """Initial plant state of ``--t-end`` and the states a load moved, in words: the closed loop's own default
+    start, :func:`codegen.idapbc.closed_loop.start_state` (``ctrl.simulate`` without ``x0`` starts there too)."""
+    from codegen.idapbc.closed_loop import start_state
+
+    return start_state(ctrl, system, x0 or None, plant_params or None)
+
+
 def _png(res) -> bytes:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

@@ -110,3 +110,24 @@ def test_a_loaded_plant_starts_where_the_load_holds_it_as_phs_control_does(tmp_p
     header = (tmp_path / "r" / "closed_loop.csv").read_text().splitlines()[0].split(",")
     assert [first[header.index(nm)] for nm in ctrl.system.state_names] == pytest.approx(list(x), abs=1e-12)
     assert res["k.l"][-1] == pytest.approx(TARGET, abs=1e-4)
+
+
+def test_a_run_over_its_cpu_budget_stops_with_one_line(ctrl):
+    """``seconds`` bounds the integration's CPU time: 200001 outputs at rtol 1e-12 take far more than 1 ms."""
+    from phs.errors import SimulationError
+
+    with pytest.raises(SimulationError) as info:
+        ctrl.simulate(np.linspace(0.0, 2000.0, 200001), rtol=1e-12, seconds=1e-3)
+    msg = str(info.value)
+    assert "did not finish in 0.001 CPU seconds" in msg and "\n" not in msg
+    assert ctrl.simulate(np.linspace(0.0, 1.0, 11), seconds=30.0).x.shape == (11, 2)  # a short run is unaffected
+
+
+def test_a_certificate_run_over_the_step_limit_fails_and_says_so(ctrl, monkeypatch):
+    import codegen.idapbc.certificates as certificates
+
+    assert ctrl.certify(rays=4, simulations=1).passed
+    monkeypatch.setattr(certificates, "RUN_STEPS", 3)  # fewer steps than any output interval needs
+    sims = next(c for c in ctrl.certify(rays=4, simulations=1).items if c.name == "simulations")
+    assert sims.verdict == "fail"
+    assert "maximum number of internal steps (3)" in sims.summary and sims.numbers["failed"] == 1
