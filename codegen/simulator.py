@@ -28,7 +28,9 @@ the collection of integrator outputs on the grid (:mod:`codegen._output`).
 
 from __future__ import annotations
 
+import threading as _threading
 import time as _time
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
@@ -105,6 +107,14 @@ that takes 1 ms, three such calls per domain exit.  With this bound it gives up 
 (``CV_REPTD_RHSFUNC_ERR``) and the exit is named at the same time and state.  1e-14 of an output interval
 is below the time's roundoff beyond the first 1 % of an interval (steps there could not move ``t``), so no
 step a solution needs is refused."""
+
+SHARED_INTEGRATORS = 256
+"""Integrators kept for every simulator of a thread (:meth:`Simulator._shared_key`; the oldest dropped
+first).  A diagnosis builds a simulator per trial of a hypothesis (parameter values differ, the structure
+and the recording's windows do not): on the EMPS stage (24.8 s at 1 kHz, 61 integrator calls per run)
+rebuilding them was a quarter of each simulation's time."""
+_SHARED: OrderedDict = OrderedDict()
+_SHARED_LOCK = _threading.Lock()
 
 REACH_SHARES = tuple(sorted({2.0 ** -k for k in range(1, 25)} | {1.0 - 2.0 ** -k for k in range(1, 25)}
                             | {j / 16 for j in range(1, 16)}))
@@ -184,6 +194,15 @@ class Simulator:
         hit = self._integrators.get(key)
         if hit is not None:
             return hit
+        shared = self._shared_key(key)
+        if shared is not None:
+            with _SHARED_LOCK:
+                hit = _SHARED.get(shared)
+                if hit is not None:
+                    _SHARED.move_to_end(shared)
+            if hit is not None:
+                self._integrators[key] = hit
+                return hit
         sx = self.f.sx
         nx, nu, npar = len(self.system.states), len(self.system.inputs), len(self.system.params)
         z = ca.SX.sym("z", nx)
@@ -237,7 +256,8 @@ class Simulator:
             dae = (self.compiler or compiled)(dae, f"{_model_hash(self.system)}|{key[2:]}|{self.scale.tolist()}|gated"
                                               + (f"|{kinds}" if kinds else ""))
         opts = {"abstol": self.atol, "reltol": self.rtol, "max_num_steps": self.max_steps, "quad_err_con": False,
-                "min_step_size": MIN_STEP, "disable_internal_warnings": True, "show_eval_warnings": False}  # failures are reported as PHS errors instead
+                "min_step_size": MIN_STEP,  # failures are reported as PHS errors instead:
+                "disable_internal_warnings": True, "show_eval_warnings": False}
         if any(g is not None for g in sampled):
             # a sampled input may change after a long constant stretch: never step over a feature of it
             opts["max_step_size"] = float(max_step)
@@ -248,7 +268,21 @@ class Simulator:
             raise SimulationError(f"simulation of {self.system.name!r}: integrator built with {F.nnz_in(2)} parameters "
                                   f"where its layout declares {layout.size}")
         self._integrators[key] = (F, layout)
+        if shared is not None:
+            with _SHARED_LOCK:
+                _SHARED[shared] = (F, layout)
+                while len(_SHARED) > SHARED_INTEGRATORS:
+                    _SHARED.popitem(last=False)
         return F, layout
+
+    def _shared_key(self, key) -> tuple | None:
+        """The key of integrator ``key`` among those every simulator of this thread shares (None for compiled
+        ones, whose libraries are cached on disk): what it is built from is the model's structure (not its
+        parameter values, which are arguments), the scaling, the tolerances and options, and ``key``."""
+        if self.compile or self.compiler is not None:
+            return None
+        return (_model_hash(self.system), _threading.get_ident(), tuple(self.scale.tolist()), self.rtol, self.atol,
+                self.max_steps, self.energy, repr(sorted(self.integrator_options.items())), key)
 
     # -- running ------------------------------------------------------------------------------
     def run(self, t, u=None, x0=None, params=None, *, signs: bool = True, progress=None) -> SimulationResult:
