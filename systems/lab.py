@@ -1,7 +1,7 @@
 """Models of three laboratory set-ups with public recordings (``../shared/data``), written as a user
 would write them for a first fit: the textbook physics, nothing about the effects the recordings are
 known to contain.  They are the nominal models of the diagnosis demonstrations
-(``docs/workflows/diagnose.md``); each is a port-Hamiltonian system given by its matrices.
+(``docs/studies/diagnosis.md``); each is a port-Hamiltonian system given by its matrices.
 
 - :func:`cascaded_tanks`: two water tanks, the upper draining into the lower, Torricelli outflow
   (Schoukens, Mattsson, Wigren, Noël, 2016 benchmark).

@@ -11,7 +11,7 @@ residual, (5) when the residual stays structured, discovers a passive correction
 states), and (6) explains the verdict in words, with the share of the mismatch it explains, the
 augmented model's structural checks (J skew, R positive semi-definite) and the fit before and after.
 
-Acceptance rule of a hypothesis (documented in ``docs/workflows/diagnose.md``): its training BIC is at
+Acceptance rule of a hypothesis (documented in ``docs/explanation/diagnosis.md``, "The steps"): its training BIC is at
 least :data:`MIN_BIC_GAIN` below the nominal model's, and its validation residual (sum over channels of
 RSS / variance) at least :data:`MIN_VALIDATION_GAIN` (relative) below the nominal model's.  Hypotheses
 whose validation residual is within :data:`SUFFICIENT_MARGIN` of the best accepted one, and whose training

@@ -25,7 +25,7 @@ parameters *and* the nominal free parameters) from the nominal fit, so that an e
 parameters absorbed is ranked on what it adds after they re-adjust.  Measured: 3 evaluations kept all
 fifteen verdicts of the 3 s concealed cases (``examples/concealed_effects.py``) but, on the 20 s
 charge-retention case, left the truth out of the three refitted hypotheses (verdict
-``viscoelastic_creep``); 5 ranks it first there (``docs/workflows/diagnose.md``, step 4).
+``viscoelastic_creep``); 5 ranks it first there (``docs/explanation/diagnosis.md``, "The steps", step 4).
 The concealed cases cited are the tests' (seed 1)."""
 
 SCREEN_RTOL = 1e-6
@@ -53,7 +53,7 @@ SCREEN_STARTS = 2
 whose plausible values span decades), the ones with the lowest training cost at their start, one
 simulation each.  The joint refit of the most promising hypotheses starts from the screening's result.
 Measured against screening from every start on the fourteen 3 s concealed cases:
-``docs/workflows/diagnose.md``, step 4.  The cases cited are the tests' (seed 1)."""
+``docs/explanation/diagnosis.md``, "The steps", step 4.  The cases cited are the tests' (seed 1)."""
 
 
 @dataclass

@@ -92,7 +92,7 @@ def cannot_describe(figures: dict) -> list[str]:
     Why these figures and not the NRMSE fit.  The fit mixes three things: shape, scale and level.  The
     level is a sensor's zero, which the library names (``offset``), and a model at rest scores a fit of
     0 % against any recording while being right about everything it describes (the leak-free chambers of
-    ``docs/workflows/diagnose.md`` §7 score 0 % and are diagnosed ``leakage``).  Shape and scale are left:
+    ``docs/studies/diagnosis.md`` (the pneumatic actuator) score 0 % and are diagnosed ``leakage``).  Shape and scale are left:
     after the fit no single effect of the library can turn a response around or multiply it by a decade,
     while a wrong unit, sign or mapping does exactly that.  The thresholds sit far from every diagnosis
     the project has: the nominal fits of the real recordings (Silverbox windows, Bouc-Wen, cascaded tanks,

@@ -73,7 +73,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         standard deviation so that a channel at quantisation level does not drown the others) and then
         kept for every hypothesis.  A dict: fixed weights per channel.  The BIC floors every channel at
         the same share whatever the weights.  The weights used are in ``Diagnosis.weights`` and the
-        report; ``docs/workflows/diagnose.md`` ("Channel weights") compares the two on the concealed cases.
+        report; ``docs/explanation/diagnosis.md`` ("Channel weights") compares the two on the concealed cases.
     discover : bool, optional
         Look for a passive correction outside the library (:mod:`phs.workflows.diagnose.discover`):
         None (default) when the final model (the nominal one when no candidate was accepted) leaves a
