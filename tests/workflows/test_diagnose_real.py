@@ -13,6 +13,7 @@ import os
 import numpy as np
 import pytest
 
+from components.candidates import LIBRARY
 from phs.workflows.diagnose import diagnose
 from phs.workflows.recording import Recording
 from systems.examples import mass_spring_damper
@@ -81,14 +82,25 @@ def test_silverbox_without_cubic_stiffness_discovers_a_hardening_spring():
     assert d.effect == "discovered" and d.verdict["rival_of"] == "hysteresis" and not d.accepted, d.summary()
 
 
-def test_bouc_wen_linear_model_misses_hysteresis():
+RIVALS = ("hysteresis", "coulomb_friction", "cubic_stiffness", "viscoelastic_creep", "offset", "quadratic_drag")
+"""The effects a linear oscillator's misfit of the Bouc-Wen data could be taken for (a loop, dry friction, a
+hardening spring, a slow relaxation, a bias, a drag), against which the default suite diagnoses it; the whole
+library under ``-m slow`` (153 s under load)."""
+
+
+@pytest.mark.parametrize("library", [pytest.param(RIVALS, id="rivals"),
+                                     pytest.param(None, id="library", marks=pytest.mark.slow)])
+def test_bouc_wen_linear_model_misses_hysteresis(library):
     raw = _csv("bouc_wen", "boucwen_val_multisine.csv")
     fs = 750.0
     n = 750
     t = raw[:n, 0] - raw[0, 0]
     rec = Recording.from_arrays(t, {"F": raw[:n, 1], "position": raw[:n, 2]})
     model = mass_spring_damper(**_linear_start(rec["position"], rec["F"], fs))
-    d = diagnose(model, rec, free=["m.m", "k.K", "b.b"], outputs=["position"], estimate_x0=["m.p", "k.l"])
+    candidates = None if library is None else [c for c in LIBRARY if c.effect in library]
+    assert candidates is None or len(candidates) == len(library)
+    d = diagnose(model, rec, free=["m.m", "k.K", "b.b"], outputs=["position"], estimate_x0=["m.p", "k.l"],
+                 candidates=candidates)
     assert d.effect == "hysteresis", d.summary()
     assert d.final.validation_fit_percent["position"] >= d.nominal.validation_fit_percent["position"] + 3.0
     assert d.structure_checks()["ok"]

@@ -118,7 +118,12 @@ def check_jacobian(case: LabCase, free, log_scaled, estimate, shooting, offsets)
     return float(err.max(initial=0.0))
 
 
-@pytest.mark.parametrize("n_examples, max_samples", EXAMPLES)
+JACOBIAN_EXAMPLES = [pytest.param(50, 80, id="default"), EXAMPLES[1]]
+"""Half of :data:`EXAMPLES` in the default suite for the Jacobian's property: each example costs its central
+differences (0.9 s, 90 s for a hundred); 2000 under ``-m slow`` as for the others."""
+
+
+@pytest.mark.parametrize("n_examples, max_samples", JACOBIAN_EXAMPLES)
 def test_exact_jacobian_agrees_with_central_differences(n_examples, max_samples):
     @settings(max_examples=n_examples)
     @given(fit_problems(max_samples))
