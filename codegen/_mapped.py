@@ -13,6 +13,7 @@ import contextlib
 import os
 import sys
 import threading
+import weakref
 
 import casadi as ca
 
@@ -65,7 +66,8 @@ class _Discard:
 
 
 _QUIET_LOCK = threading.Lock()
-_QUIET = {"depth": 0, "saved": None}
+_QUIET = {"depths": {}, "saved": None}  # per thread inside quiet(): its depth; the streams to give back
+_ABANDONED: weakref.WeakSet = weakref.WeakSet()  # threads that silence no longer (see unsilence)
 
 
 @contextlib.contextmanager
@@ -74,22 +76,56 @@ def quiet():
 
     CasADi prints through Python's ``sys.stdout``/``sys.stderr``; they are swapped once for all
     threads inside (a per-call ``redirect_stdout`` would, with several threads, restore another
-    thread's sink and lose the console for good).
+    thread's sink and lose the console for good), and given back when the last thread leaves.
 
     Examples
     --------
     >>> with quiet():
     ...     print("not shown")
     """
+    me = threading.current_thread()
     with _QUIET_LOCK:
-        if _QUIET["depth"] == 0:
-            _QUIET["saved"] = (sys.stdout, sys.stderr)
-            sys.stdout = sys.stderr = _Discard()
-        _QUIET["depth"] += 1
+        counted = me not in _ABANDONED
+        if counted:
+            if not _QUIET["depths"]:
+                _QUIET["saved"] = (sys.stdout, sys.stderr)
+                sys.stdout = sys.stderr = _Discard()
+            _QUIET["depths"][me] = _QUIET["depths"].get(me, 0) + 1
     try:
         yield
     finally:
         with _QUIET_LOCK:
-            _QUIET["depth"] -= 1
-            if _QUIET["depth"] == 0:
-                sys.stdout, sys.stderr = _QUIET["saved"]
+            depths = _QUIET["depths"]
+            if counted and me in depths:  # not unsilenced meanwhile
+                depths[me] -= 1
+                if not depths[me]:
+                    del depths[me]
+                if not depths:
+                    sys.stdout, sys.stderr = _QUIET["saved"]
+
+
+def unsilence(thread: threading.Thread) -> None:
+    """Give the streams back now and for good from ``thread``, whose evaluation was abandoned.
+
+    An evaluation abandoned at an interrupt (its caller stopped waiting for it) runs on unobserved;
+    its :func:`quiet` blocks, current and to come, must not hide what the caller says next (the
+    interrupt's notice).  Other threads inside :func:`quiet` keep the streams silenced
+    until they leave.
+
+    Examples
+    --------
+    >>> before = sys.stdout
+    >>> with quiet():
+    ...     unsilence(threading.current_thread())
+    ...     sys.stdout is before
+    True
+    >>> with quiet():  # this thread silences no more
+    ...     sys.stdout is before
+    True
+    >>> _ABANDONED.discard(threading.current_thread())
+    """
+    with _QUIET_LOCK:
+        _ABANDONED.add(thread)
+        depths = _QUIET["depths"]
+        if depths.pop(thread, None) and not depths:
+            sys.stdout, sys.stderr = _QUIET["saved"]

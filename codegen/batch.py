@@ -50,7 +50,7 @@ from codegen._batch_plan import Shape, plan_shape, run_function
 from codegen._batch_result import SIGNALS, BatchResult
 from codegen._domain import fmt_state
 from codegen._grid import time_grid
-from codegen._mapped import Mapped, default_threads, quiet
+from codegen._mapped import Mapped, default_threads, quiet, unsilence
 from codegen._output import energy_columns
 from codegen._serialize import deserialize_functions, serialize_functions
 from codegen._solver_errors import describe
@@ -59,7 +59,7 @@ from codegen.simulator import Simulator
 from phs.errors import DomainError, InputDataError, PHSError, SimulationError
 
 __all__ = ["BatchSimulator", "BatchResult", "LOCK", "SIGNALS", "default_threads", "serialize_functions",
-           "deserialize_functions"]
+           "deserialize_functions", "unsilence"]
 
 #: Held while a batch runs.  CasADi releases Python's GIL during its calls, but building functions
 #: (integrators, maps) is not thread-safe: concurrent batches in one process (threads of a Dask worker)

@@ -10,6 +10,13 @@ CasADi swallow it, a one-shot profile hook raises it again as soon as control is
 the runs of a sweep, before the outputs of a command are written).  A second signal ends the
 process at once.  On leaving :func:`watching` the previous handlers are restored.
 
+Python runs signal handlers in the main thread only, between two of its bytecodes: a CasADi call
+that evaluates in threads of its own (a mapped function's ``"thread"`` evaluation) holds the main
+thread until every thread is done, and the signal would wait for it.  :class:`Worker` runs such a
+call in a daemon thread while the main thread waits in short intervals, so the signal stops the
+command at once; the abandoned call runs on unobserved (its result is never kept) and ends with the
+process.
+
 Examples
 --------
 >>> with watching():
@@ -22,12 +29,18 @@ from __future__ import annotations
 
 import contextlib
 import os
+import queue
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+#: Seconds between the main thread's looks at a signal while a :class:`Worker` computes (a signal
+#: usually interrupts the wait at once; this bounds the delay where it does not).
+POLL_SECONDS = 0.05
 _state = {"depth": 0, "received": None, "deferred": False}
 
 
@@ -153,3 +166,85 @@ def deferred() -> Iterator[None]:
         yield
     finally:
         _state["deferred"] = before
+
+
+class Worker:
+    """Run blocking calls in a daemon thread while the calling (main) thread waits in short intervals.
+
+    A call made from the main thread is handed to the worker thread (started at the first call, one
+    call at a time, so that per-thread caches such as CasADi's call buffers are reused), and the main
+    thread waits for it :data:`POLL_SECONDS` at a time: a signal received meanwhile raises
+    :class:`Interrupted` in the main thread at once, and the call goes on in the worker thread,
+    abandoned: its result or error is dropped, ``on_abandon(thread)`` is called (to undo what the
+    call holds for the process: the batch evaluation's silenced streams, :func:`codegen.batch.unsilence`),
+    and, the thread being a daemon, it neither delays nor blocks the end of the process.  The next
+    call gets a new thread.  The call's exception is raised in the caller.  Called from another
+    thread, the call runs in place.  :meth:`close` lets the thread end after its current call.
+
+    Parameters
+    ----------
+    on_abandon : callable, optional
+        Called with the worker thread when a call is abandoned.
+
+    Examples
+    --------
+    >>> w = Worker()
+    >>> w(sum, [1, 2, 3])
+    6
+    >>> w(int, "x")
+    Traceback (most recent call last):
+    ...
+    ValueError: invalid literal for int() with base 10: 'x'
+    >>> w.close()
+    """
+
+    def __init__(self, on_abandon: Callable[[threading.Thread], None] | None = None):
+        self.on_abandon = on_abandon
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+
+    def __call__(self, fn: Callable[..., Any], /, *args, **kwargs) -> Any:
+        if threading.current_thread() is not threading.main_thread():
+            return fn(*args, **kwargs)
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._serve, args=(self._jobs,), name="phs-worker", daemon=True)
+            self._thread.start()
+        done, box = threading.Event(), {}
+        self._jobs.put((fn, args, kwargs, done, box))
+        try:
+            while not done.wait(POLL_SECONDS):  # the signal's handler runs here and raises Interrupted
+                pass
+        except BaseException:
+            if not done.is_set():  # abandoned: the thread ends after the call; the next call gets another
+                thread = self._thread
+                self.close()
+                self._jobs = queue.SimpleQueue()
+                if self.on_abandon is not None:
+                    self.on_abandon(thread)
+            raise
+        if "error" in box:
+            raise box["error"]
+        return box["value"]
+
+    @staticmethod
+    def _serve(jobs: queue.SimpleQueue) -> None:
+        while (job := jobs.get()) is not None:
+            fn, args, kwargs, done, box = job
+            try:
+                box["value"] = fn(*args, **kwargs)
+            except BaseException as exc:  # handed to the caller (dropped when the caller has left)
+                box["error"] = exc
+            finally:
+                done.set()
+            del job, fn, args, kwargs, done, box  # nothing of a finished call stays alive in the thread
+
+    def close(self) -> None:
+        """Let the worker thread end once its current call (if any) returns.
+
+        Examples
+        --------
+        >>> Worker().close()  # never started: nothing to end
+        """
+        if self._thread is not None:
+            self._jobs.put(None)
+            self._thread = None

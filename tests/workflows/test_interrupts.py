@@ -5,22 +5,25 @@
 Each test runs the command in a subprocess and sends the signal once the command is busy: after the first
 rows reached the sweep's part directory, or after a delay for ``simulate``.  The runs are made long
 (a 50 Hz square wave over seconds: hundreds of integrator restarts per run) so that the signal lands
-inside an integration, where CasADi would otherwise swallow it.
+inside an integration, where CasADi would otherwise swallow it; one threaded sweep has a chunk of
+seconds, so that the signal lands inside CasADi's threaded evaluation, which holds its calling thread.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
 
 from phs.workflows.cli import main
-from phs.workflows.interrupts import Interrupted, check, deferred, received, watching
+from phs.workflows.interrupts import Interrupted, Worker, check, deferred, received, watching
 
 PHS = [sys.executable, "-m", "phs.workflows.cli"]
 SWEEP = ["sweep", "systems.examples:rc_circuit", "--t-end", "2", "--dt", "1e-3", "--input", "square(1, 50)",
@@ -99,6 +102,41 @@ def test_an_interrupted_sweep_keeps_its_finished_rows_and_resumes(tmp_path, sig,
     assert [int(r["run"]) for r in rows] == list(range(6)) and {r["status"] for r in rows} == {"ok"}
 
 
+# Two cheap runs (a 1 Hz sine), then a chunk of two runs driven by a 3 kHz sine over 4 s, one per thread of
+# CasADi's threaded map (they share their input: one map call): CVODES resolves every period, and the chunk takes
+# 3.6-3.8 s (measured by the resume: its JSON's "seconds").  A smooth input has no breakpoint: little is built
+# before the chunk evaluates, so a signal shortly after the first part lands in the threaded evaluation.  Before
+# the evaluation ran in a worker thread, such a signal waited for the chunk: the command stopped 3.6-4.6 s after it.
+LONG_CHUNK = ["sweep", "systems.examples:rc_circuit", "--t-end", "4", "--dt", "1e-3", "--input", "U=sin(2*pi*f*t)",
+              "--range", "f=1,3000", "--range", "R.R=1e3,2e3", "--metric", "final:v_C", "--chunk", "2", "--threads", "2",
+              "--quiet"]
+STOP_SECONDS = 3.0  # measured 0.3-1.0 s (the interpreter's exit competes with the abandoned chunk's two threads)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_threaded_sweep_stops_inside_its_chunk(tmp_path, sig):
+    """The chunk in flight is abandoned: the command exits within a second or so, not when the chunk ends."""
+    out = tmp_path / "out.csv"
+    proc = _start(LONG_CHUNK + ["--out", str(out)], tmp_path)
+    _wait_for_parts(proc, str(out) + ".parts", 1)
+    time.sleep(0.5)  # inside the long chunk's evaluation (3.6-3.8 s)
+    code, err, seconds = _stop(proc, sig)
+    assert code == 128 + sig, err
+    assert f"interrupted ({signal.Signals(sig).name})" in err and "Traceback" not in err
+    assert seconds < STOP_SECONDS, seconds
+    assert [(r["run"], r["status"]) for r in _rows(out)] == [("0", "ok"), ("1", "ok")]  # none of the chunk in flight
+    assert sorted(os.listdir(tmp_path)) == ["out.csv", "out.csv.study.json"]  # no part, no temporary file left
+    if sig == signal.SIGTERM:
+        return  # the resume is the same for both signals: once is enough (it costs the chunk's time)
+    assert main(LONG_CHUNK + ["--out", str(out), "--resume", "--json", str(tmp_path / "r.json")]) == 0
+    rows = _rows(out)
+    assert [int(r["run"]) for r in rows] == [0, 1, 2, 3] and {r["status"] for r in rows} == {"ok"}  # each run once
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["new_runs"] == 2  # only the chunk that was in flight ran again
+    print(f"stopped {seconds:.2f} s after the signal; the chunk in flight takes {report['seconds']:.2f} s")  # -rP
+    assert seconds < 0.5 * report["seconds"], (seconds, report["seconds"])  # waiting for it would take longer
+
+
 @pytest.mark.slow  # starting and closing a local Dask cluster twice: about 20 s
 def test_an_interrupted_sweep_on_dask_processes_stops_and_resumes(tmp_path):
     pytest.importorskip("dask.distributed")
@@ -142,3 +180,38 @@ def test_watching_restores_the_handlers_and_check_raises_the_signal_received():
         with pytest.raises(Interrupted), deferred():
             pass  # the renames of a command's outputs do not start after a signal
     assert signal.getsignal(signal.SIGTERM) is before and received() is None
+
+
+def test_a_worker_call_is_abandoned_at_the_signal_and_the_streams_come_back():
+    from codegen.batch import quiet, unsilence
+
+    started, release, finished = threading.Event(), threading.Event(), threading.Event()
+    seen = []
+
+    def blocking():  # stands for a batch evaluation: silences the streams, holds its thread
+        with quiet():
+            started.set()
+            release.wait(30)
+        with quiet():  # a later silenced block of the abandoned evaluation
+            seen.append(sys.stderr)
+        finished.set()
+        return "too late"
+
+    def signal_when_started():
+        started.wait(30)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    worker, streams = Worker(on_abandon=unsilence), (sys.stdout, sys.stderr)
+    assert worker(sum, [1, 2]) == 3  # an ordinary call: its value
+    with watching():
+        threading.Thread(target=signal_when_started, daemon=True).start()
+        begin = time.monotonic()
+        with pytest.raises(Interrupted) as info:
+            worker(blocking)
+        seconds = time.monotonic() - begin
+        assert (sys.stdout, sys.stderr) == streams  # given back at once though the call still holds its quiet()
+    release.set()
+    assert finished.wait(30) and seen == [streams[1]]  # the abandoned call silences no more
+    assert info.value.exit_code == 130 and seconds < 5, seconds  # at once, not after the call's 30 s
+    assert worker(sum, [3, 4]) == 7  # a new thread serves the next call
+    worker.close()

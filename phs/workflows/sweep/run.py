@@ -8,7 +8,7 @@ import time as _time
 import numpy as np
 
 from phs.errors import InputDataError
-from phs.workflows.interrupts import check, watching
+from phs.workflows.interrupts import Worker, check, watching
 from phs.workflows.sweep.evaluate import _describe, _evaluate_chunk, _Evaluator, _failed_row
 from phs.workflows.sweep.metrics import column_units
 from phs.workflows.sweep.result import StudyResult
@@ -158,17 +158,25 @@ def _run(study, todo, store, bar, distributed, threads, processes, scheduler, ch
             if distributed:
                 _run_dask(study, todo, store, bar, scheduler, processes, threads or 1, chunk_size)
             else:
-                from codegen.batch import default_threads
+                from codegen.batch import default_threads, unsilence
 
                 n_threads = threads or default_threads()
                 size = chunk_size or _chunk_size(study, len(todo), n_threads)
                 ev = _Evaluator(study, n_threads)
-                for chunk in _chunks(todo, size, exact=chunk_size is not None):
-                    check()
-                    rows = ev([(k, study.values(k)) for k in chunk])
-                    check()
-                    store.add(rows)
-                    bar.update(rows)
+                # CasADi's threaded evaluation holds the thread that calls it until the chunk is done: in a
+                # worker thread, so that a signal stops the sweep at once (the chunk in flight is dropped)
+                worker = Worker(on_abandon=unsilence) if n_threads > 1 else None
+                try:
+                    for chunk in _chunks(todo, size, exact=chunk_size is not None):
+                        check()
+                        runs = [(k, study.values(k)) for k in chunk]
+                        rows = worker(ev, runs) if worker is not None else ev(runs)
+                        check()
+                        store.add(rows)
+                        bar.update(rows)
+                finally:
+                    if worker is not None:
+                        worker.close()
     finally:
         bar.close()
         store.close()
