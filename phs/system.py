@@ -26,6 +26,7 @@ from phs._sparse import nonzero_entries, srepr_matrix
 from phs.errors import ModelError, ParameterError
 from phs.io import load_system, save_system
 from phs.params import EnergyTerm, InputInfo, Measured, Param, StateInfo, check_name
+from phs.structure_units import construction_problems
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -437,10 +438,12 @@ class PHSystem:
 
     def _check_structure(self, problems: list[str]) -> None:
         """J, N skew and D symmetric (symbolic within the budget of :mod:`phs._budget`, else sampled); D not
-        negative (nor undefined) at sampled points of the declared ranges."""
+        negative (nor undefined) at sampled points of the declared ranges; the units of the structure where
+        the declared units decide them (:func:`phs.structure_units.construction_problems`)."""
         from phs.checks import structure_problems  # local import: checks uses PHSystem
 
         self._sampled_structure = FrozenDict(structure_problems(self, problems))
+        problems += construction_problems(self)  # units of J, R, G, P, S, N, ports, measured outputs, where decided
 
     def _psd_culprits(self, block_names) -> str:
         """The resistive elements acting on a block, and their parameters with negative values."""

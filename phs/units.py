@@ -223,7 +223,9 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = Fa
 
     With ``free_floats``, a floating-point number (``35.15``, not ``2`` or ``1/2``) is a constant whose
     unit was not declared: it takes whatever dimension its place requires, and an expression whose
-    dimension rests on one comes out as None (undecided) rather than dimensionless.
+    dimension rests on one comes out as None (undecided) rather than dimensionless.  So do zero, NaN and
+    the infinities, which carry no unit of their own (the zero branch of a contact force
+    ``Piecewise((k*x, x > 0), (0, True))``, the bound of ``Max(0, F)``).
 
     Examples
     --------
@@ -233,6 +235,8 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = Fa
     >>> m = parse_unit("m")
     >>> dimension(x + 2.5 * k, {x: m, k: m}, free_floats=True) == m, dimension(2.5 * x, {x: m}, free_floats=True)
     (True, None)
+    >>> dimension(sp.Max(0, k * x), {x: m, k: m}, free_floats=True) == parse_unit("m**2")
+    True
     """
     cache: dict[sp.Expr, Dim | None] = {}
 
@@ -250,7 +254,7 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = Fa
         if e in cache:
             return cache[e]
         if e.is_Number or e.is_NumberSymbol:
-            d = None if free_floats and e.is_Float else DIMENSIONLESS
+            d = None if free_floats and (e.is_Float or e.is_zero or not e.is_finite) else DIMENSIONLESS
         elif e.is_Symbol:
             if e not in units:
                 raise UnitError(f"no unit known for symbol {e}")

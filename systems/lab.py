@@ -30,13 +30,15 @@ def _smooth_sqrt(level: sp.Expr, eps: float) -> sp.Expr:
 def cascaded_tanks(k1: float = 0.05, k2: float = 0.05, k4: float = 0.05, h0: float = 20.0, eps: float = 0.05) -> PHSystem:
     """Two tanks, the upper one draining into the lower one, filled by a pump (Torricelli outflow).
 
-    States ``V1``, ``V2``: stored volumes [m³] of tanks of unit cross-section (the level equals the
-    volume); the levels are in the units of the benchmark's level sensor (volts read as metres).
-    Energy ``H = ρg (V1²/2 + h0 V1 + V2²/2)``: the upper tank's outlet lies ``h0`` above the lower
-    tank's bottom, so the water falling between them gives up potential energy, which is the power
-    the first orifice dissipates.  Outflows ``q1 = k1 √V1`` (into the lower tank) and
-    ``q2 = k2 √V2`` (to the reservoir), written with the smoothed root of :func:`_smooth_sqrt`; the
-    pump delivers ``k4 u`` for a pump voltage ``u`` [V].  Measured: ``level2`` (the lower tank).
+    States ``V1``, ``V2``: stored volumes [m³] of tanks of cross-section ``A = 1 m²`` (the level
+    ``V/A`` equals the volume in number); the levels are in the units of the benchmark's level
+    sensor (volts read as metres).  Energy ``H = ρg (V1²/(2A) + h0 V1 + V2²/(2A))``: the upper
+    tank's outlet lies ``h0`` above the lower tank's bottom, so the water falling between them gives
+    up potential energy, which is the power the first orifice dissipates.  Outflows
+    ``q1 = k1 √(V1/A)`` (into the lower tank) and ``q2 = k2 √(V2/A)`` (to the reservoir), written with
+    the smoothed root of :func:`_smooth_sqrt`; the pump delivers ``k4 u`` for a pump voltage ``u``
+    [V].  Measured: ``level2 = V2/A`` (the lower tank).  ``A`` is a parameter so that every term
+    has its unit (it was once a bare 1, so that volumes in m³ were read as levels in m).
 
     ``(J − R) ∇H`` reproduces ``V̇1 = −q1 + k4 u``, ``V̇2 = q1 − q2`` with ``R`` symmetric positive
     semidefinite while the lower tank's level stays below ``h0`` above the upper one's (a validity
@@ -59,20 +61,22 @@ def cascaded_tanks(k1: float = 0.05, k2: float = 0.05, k4: float = 0.05, h0: flo
     pk4 = Param("k4", k4, "m**3/(s*V)", "pump flow per volt", range=(1e-4, 1.0))
     ph0 = Param("h0", h0, "m", "height of the upper tank's outlet above the lower tank's bottom", range=(1.0, 100.0))
     rg = Param("rho_g", 9810.0, "N/m**3", "specific weight of water", range=(9000.0, 11000.0))
-    a, b, c, h, w = pk1.symbol, pk2.symbol, pk4.symbol, ph0.symbol, rg.symbol
-    q1 = a * _smooth_sqrt(V1, eps)  # the lower outflow q2 = b √V2 enters through g2 = q2 / e2 below
-    head = V1 + h - V2  # (e1 - e2) / (rho g): the drop across the first orifice
+    pA = Param("A", 1.0, "m**2", "cross-section of each tank (levels in the sensor's units)", range=(0.5, 2.0))
+    a, b, c, h, w, A = pk1.symbol, pk2.symbol, pk4.symbol, ph0.symbol, rg.symbol, pA.symbol
+    L1, L2 = V1 / A, V2 / A  # the levels
+    q1 = a * _smooth_sqrt(L1, eps)  # the lower outflow q2 = b √L2 enters through g2 = q2 / e2 below
+    head = L1 + h - L2  # (e1 - e2) / (rho g): the drop across the first orifice
     g1 = q1 / (w * head)  # conductance of the first orifice
-    g2 = b / (w * (V2**2 + eps**2) ** sp.Rational(1, 4))  # q2 / e2
+    g2 = b / (w * (L2**2 + eps**2) ** sp.Rational(1, 4))  # q2 / e2
     R = sp.Matrix([[g1, -g1], [-g1, g1 + g2]])
     states = [StateInfo("V1", "m**3", (-0.5, 40.0), "water in the upper tank (level, sensor units)", "C", 5.0, "tank1"),
               StateInfo("V2", "m**3", (-0.5, 40.0), "water in the lower tank (level, sensor units)", "C", 5.0, "tank2")]
-    H = [EnergyTerm("tank1", w * (V1**2 / 2 + h * V1)), EnergyTerm("tank2", w * V2**2 / 2)]
+    H = [EnergyTerm("tank1", w * (V1**2 / (2 * A) + h * V1)), EnergyTerm("tank2", w * V2**2 / (2 * A))]
     return PHSystem(
         "cascaded_tanks", states, H, sp.zeros(2, 2), R, sp.Matrix([[c], [0]]),
         inputs=[InputInfo("u", "V", "u.y", "m**3*Pa/(s*V)", "effort", "pump voltage", (0.0, 10.0))],
-        params=[pk1, pk2, pk4, ph0, rg],
-        measured=[Measured("level2", V2, "m", "level of the lower tank (sensor units)")],
+        params=[pk1, pk2, pk4, ph0, rg, pA],
+        measured=[Measured("level2", L2, "m", "level of the lower tank (sensor units)")],
         conditions=[Condition("lower tank below the upper outlet", head - 0.5,
                               "the lower tank's level stays below the upper tank's outlet")],
         dissipators=[("orifice1", {(0, 0): g1, (0, 1): -g1, (1, 1): g1}), ("orifice2", {(1, 1): g2})],

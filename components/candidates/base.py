@@ -353,20 +353,26 @@ def _position_partner(system, p_name: str) -> str | None:
     return None
 
 
-def with_groups(names: list[str]) -> list[str]:
+def with_groups(names: list[str], units: dict | None = None) -> list[str]:
     """Attach points from state names: repeated parts of identical segments (``s1.Q2``, ``s2.Q2``)
     become one ``*.Q2`` entry (the effect on all of them, with one set of parameters, as the segments
-    share their parameters); other names stay as they are.
+    share their parameters); other names stay as they are.  With ``units`` (name to unit), names of one
+    suffix in different units are no repeated parts (a rotating ``tail.p`` and a sliding ``body.p``: one
+    parameter cannot serve both) and stay apart.
 
     Examples
     --------
     >>> with_groups(["s1.Q2", "s2.Q2", "Q"])
     ['Q', '*.Q2']
+    >>> with_groups(["tail.p", "body.p"], {"tail.p": "kg*m**2/s", "body.p": "kg*m/s"})
+    ['tail.p', 'body.p']
     """
     suffix = {}
     for n in names:
         if "." in n:
             suffix.setdefault(n.split(".", 1)[1], []).append(n)
+    if units is not None:
+        suffix = {k: v for k, v in suffix.items() if len({units.get(n) for n in v}) == 1}
     grouped = {n for v in suffix.values() if len(v) > 1 for n in v}
     return [n for n in names if n not in grouped] + [f"*.{k}" for k, v in suffix.items() if len(v) > 1]
 
@@ -516,7 +522,7 @@ class _AtStates(Candidate):
         raise NotImplementedError
 
     def attach_points(self, system) -> list[str]:
-        return with_groups(self.states(system))
+        return with_groups(self.states(system), {st.name: st.unit for st in system.states})
 
     def augment(self, system, where, scales):
         self._check_where(system, where)

@@ -62,8 +62,9 @@ def scale_input(system, input_name: str, gain: sp.Expr, params, effect: str) -> 
     >>> from systems.examples import mass_spring_damper
     >>> s = mass_spring_damper()
     >>> q = s.states[s.state_names.index("k.l")].symbol
-    >>> t = scale_input(s, "F", 1 - q**2, [], "gain")
-    >>> sp.simplify(t.G[1, 0] - (1 - q**2) * s.G[1, 0])
+    >>> gain = 1 - (q / 0.1)**2  # falls with the spring's extension (0.1 m: a scale without a declared unit)
+    >>> t = scale_input(s, "F", gain, [], "gain")
+    >>> sp.simplify(t.G[1, 0] - gain * s.G[1, 0])
     0
     """
     n, j = len(system.states), system.input_names.index(input_name)

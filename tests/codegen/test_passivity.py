@@ -184,12 +184,16 @@ def test_state_dependent_R_losing_definiteness_is_found_where_it_is_negative():
 def test_dissipation_over_the_symbolic_budget_finishes_and_is_not_a_pass():
     """R = (Q+R+2)**120 - (Q+R+1)**120 (positive, ~1e359: inf - inf = nan in floating point): the certificate
     once hung in the symbolic minors; now it refuses them as over the budget, cannot sample D in floats, and says
-    both instead of passing (measured 0.3 s; bound 20 s for a loaded machine)."""
+    both instead of passing (measured 0.3 s; bound 20 s for a loaded machine).  The charge's unit is left
+    undeclared: the entry adds a charge to a resistance, which the constructor's unit check would refuse."""
+    from dataclasses import replace
+
     rc = rc_circuit()
     s = sp.Symbol("C.Q", real=True) + sp.Symbol("R.R", positive=True)
     entry = (s + 2) ** 120 - (s + 1) ** 120
     system = rc._replace(R=sp.Matrix([[entry]]), dissipators=(("R", {(0, 0): entry, (0, 1): rc.P[0, 0],
-                                                                     (1, 1): rc.S[0, 0]}),))
+                                                                     (1, 1): rc.S[0, 0]}),),
+                         states=[replace(rc.states[0], unit="1")])
     t = time.perf_counter()
     report = certify(system, samples=64, starts=1)
     assert time.perf_counter() - t < 20.0
@@ -198,15 +202,16 @@ def test_dissipation_over_the_symbolic_budget_finishes_and_is_not_a_pass():
     assert "not finite" in diss.summary and "over the symbolic budget" in diss.summary
 
 
-def test_damper_declared_in_newtons_is_not_certified(msd):
-    """The certificate used to say PASSIVE for a damper whose coefficient is declared in N: the structure's
-    units disagree (R[0,0] is a force where kg/s is needed), so it is no physical power balance."""
+def test_damper_without_its_unit_is_not_certified(msd):
+    """The certificate used to say PASSIVE for a damper whose coefficient is declared in N (such a model is now
+    refused when built).  One whose unit is left at the default "1" builds, and check() takes it as
+    dimensionless: the structure's units disagree (R[0,0] is 1 where kg/s is needed), no physical power balance."""
     from dataclasses import replace
 
-    bad = msd._replace(params=[replace(q, unit="N") if q.name == "b.b" else q for q in msd.params])
+    bad = msd._replace(params=[replace(q, unit="1") if q.name == "b.b" else q for q in msd.params])
     report = certify(bad, samples=32, starts=1)
     assert not report.passive and report["units"].verdict == "fail"
-    assert "R[0,0] (element 'b') is kg*m/s**2 (N), expected kg/s" in report["units"].summary
+    assert "R[0,0] (element 'b') is 1, expected kg/s" in report["units"].summary
     assert [t.name for t in certify(msd, samples=32, starts=1).tests if t.name == "units"] == []
 
 

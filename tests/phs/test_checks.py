@@ -25,10 +25,13 @@ def _power_difference(first: int, second: int) -> str:
 
 
 def _saved_rc(tmp_path, entry: str):
-    """The RC circuit saved to JSON with its dissipation entry R[0,0] (and the resistor's form) replaced."""
+    """The RC circuit saved to JSON with its dissipation entry R[0,0] (and the resistor's form) replaced.  The
+    charge's unit is left undeclared ("1"): the entry adds a charge to a resistance, which the constructor's unit
+    check would refuse before the dissipation checks these tests are about."""
     path = tmp_path / "rc.json"
     rc_circuit().save(path)
     data = json.loads(path.read_text())
+    data["states"][0]["unit"] = "1"
     data["matrices"]["R"] = f"ImmutableDenseMatrix([[{entry}]])"
     data["dissipators"][0]["entries"]["0,0"] = entry
     path.write_text(json.dumps(data))
