@@ -47,8 +47,9 @@ class Runaway(Candidate):
         from phs import Param
 
         a = Param("runaway.a", 1.0, "S", "strength of the runaway conductance", (0.1, 10.0))
+        q1 = Param("runaway.q1", 1.0, "C", "charge above which the conductance is defined", (0.5, 2.0))
         q = system.states[system.state_names.index(where)].symbol
-        s = add_damping(system, where, a.symbol * sp.exp(sp.sqrt(q - 1)), [a], self.effect)
+        s = add_damping(system, where, a.symbol * sp.exp(sp.sqrt(q / q1.symbol - 1)), [a, q1], self.effect)
         return Augmentation(self.effect, where, "runaway conductance", s, [a.name], {a.name: a.range}, [])
 
 
