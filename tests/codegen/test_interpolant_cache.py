@@ -13,17 +13,25 @@ from codegen.simulator import Simulator
 from systems.examples import rc_circuit
 
 SIM = sys.modules["codegen._interpolants"]
+SIMULATOR = sys.modules["codegen.simulator"]
+
+
+def _forget():
+    """No interpolant kept, and no integrator either (simulators share theirs: ``SHARED_INTEGRATORS``), so
+    that the next run builds its interpolants."""
+    SIM._INTERPOLANTS.clear()
+    SIMULATOR._SHARED.clear()
 
 
 def test_cached_interpolant_gives_the_same_run_and_the_cache_is_bounded(monkeypatch):
     t = np.linspace(0.0, 0.02, 2001)
     u = np.sin(2 * np.pi * 150 * t) + 0.2 * np.sin(2 * np.pi * 900 * t)  # smooth: a B-spline in windows
-    SIM._INTERPOLANTS.clear()
+    _forget()
     first = Simulator(rc_circuit(), energy=False).run(t, u={"U": u})["v_C"]
     assert SIM._INTERPOLANTS  # the run's interpolants were kept
     again = Simulator(rc_circuit(R=1e3), energy=False).run(t, u={"U": u})  # another simulator, same samples
     fresh_cache = dict(SIM._INTERPOLANTS)
-    SIM._INTERPOLANTS.clear()
+    _forget()
     rebuilt = Simulator(rc_circuit(R=1e3), energy=False).run(t, u={"U": u})
     # the same interpolant, whether cached or built anew: identical runs (bitwise)
     assert np.array_equal(np.asarray(again["v_C"]), np.asarray(rebuilt["v_C"]))
@@ -32,7 +40,7 @@ def test_cached_interpolant_gives_the_same_run_and_the_cache_is_bounded(monkeypa
     # other samples while the cache holds the first ones: their own interpolant, not a cached one
     other = np.cos(2 * np.pi * 120 * t)
     cached = Simulator(rc_circuit(), energy=False).run(t, u={"U": other})["v_C"]
-    SIM._INTERPOLANTS.clear()
+    _forget()
     alone = Simulator(rc_circuit(), energy=False).run(t, u={"U": other})["v_C"]
     assert np.array_equal(np.asarray(cached), np.asarray(alone))
     assert not np.allclose(np.asarray(cached), np.asarray(first))
