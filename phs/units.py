@@ -215,6 +215,14 @@ class _Mismatch(Exception):
     pass
 
 
+def _float_exponent(exp) -> Fraction | None:
+    """A floating-point exponent that is exactly a fraction of denominator at most 12 (``-0.5``), else None."""
+    if not exp.is_Float:
+        return None
+    f = Fraction(float(exp)).limit_denominator(12)
+    return f if float(f) == float(exp) else None
+
+
 def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = False) -> Dim | None:
     """Dimension of ``expr`` given the dimension of each symbol.
 
@@ -225,7 +233,8 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = Fa
     unit was not declared: it takes whatever dimension its place requires, and an expression whose
     dimension rests on one comes out as None (undecided) rather than dimensionless.  So do zero, NaN and
     the infinities, which carry no unit of their own (the zero branch of a contact force
-    ``Piecewise((k*x, x > 0), (0, True))``, the bound of ``Max(0, F)``).
+    ``Piecewise((k*x, x > 0), (0, True))``, the bound of ``Max(0, F)``), and a floating-point exponent
+    that is exactly a simple fraction (``x**-0.5``) is that fraction.
 
     Examples
     --------
@@ -275,8 +284,9 @@ def dimension(expr: sp.Expr, units: dict[sp.Symbol, Dim], free_floats: bool = Fa
                 d = None if d is None or x is None else _mul(d, x)
         elif e.is_Pow:
             db = rec(e.base)
-            if e.exp.is_Rational:
-                d = None if db is None else _pow(db, Fraction(str(e.exp)))
+            exact = _float_exponent(e.exp) if free_floats else None  # x**-0.5, as sympy leaves 1/sqrt(4.0*x**2)
+            if e.exp.is_Rational or exact is not None:
+                d = None if db is None else _pow(db, exact if exact is not None else Fraction(str(e.exp)))
             else:
                 if rec(e.exp) not in (DIMENSIONLESS, None) or db not in (DIMENSIONLESS, None):
                     raise UnitError(f"non-integer power of a dimensioned quantity: {e}")
