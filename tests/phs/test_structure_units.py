@@ -165,5 +165,5 @@ def test_a_float_exponent_that_is_a_simple_fraction_is_that_fraction():
     """Friction laws written with floats leave powers such as (4.0 p**2 + v_s**2)**-0.5 (sympy keeps the float
     exponent): -0.5 is the square root's -1/2, not a power the constructor cannot read."""
     v_s = Param("v_s", 0.01, "m/s")
-    entry = B.symbol * p / M.symbol * (4.0 * p**2 / M.symbol**2 + v_s.symbol**2) ** -0.5
+    entry = B.symbol * v_s.symbol * (4.0 * p**2 / M.symbol**2 + v_s.symbol**2) ** -0.5
     assert construction_problems(pushed_mass(R=[[0, 0], [0, entry]], extra=[v_s])) == []
