@@ -96,7 +96,7 @@ def test_a_command_driving_no_single_body_is_refused():
 
     lone = mass_spring_damper()
     lone = lone.__class__(lone.name, states=lone.states, H=list(lone.energy_terms), J=lone.J, R=lone.R, G=lone.G,
-                          inputs=lone.inputs, params=lone.params, measured=[Measured("c", lone.states[1].symbol, "N", command=True)])
+                          inputs=lone.inputs, params=lone.params, measured=[Measured("c", lone.states[1].symbol, "m", command=True)])
     with pytest.raises(ModelError, match="drive 0 bodies"):
         driven_body(lone, "c")
 
