@@ -35,9 +35,10 @@ def test_local_search_refines_a_nearby_start_without_the_grid():
     cost, calls = _counted(2.0)
     found = element_search(cost, SPECS, [1.7], local=True)[0]
     assert math.isclose(found, 2.0, rel_tol=1e-2)
-    # the refinement (at most 8), the bracket's two ends and the start's own cost, no grid (the whole
-    # search costs the grid's ten more)
-    assert len(calls) <= 11
+    # the start, the points an eighth of a grid step either side, one step on downhill and two parabolic
+    # steps: no grid (the whole search costs ten more) and no Brent refinement inside the grid's bracket
+    # (eight more)
+    assert len(calls) <= 6
 
 
 def test_local_search_falls_back_to_the_grid_when_the_minimum_is_far():
@@ -46,6 +47,21 @@ def test_local_search_falls_back_to_the_grid_when_the_minimum_is_far():
     # the bracket around 0.05 s ends at its upper edge: the whole grid then finds 6 s
     assert math.isclose(found, 6.0, rel_tol=1e-2)
     assert len(calls) > 18
+
+
+def test_local_search_in_a_linear_range_and_at_its_start():
+    # a parameter whose range crosses zero is searched in itself; a start at the minimum stays, in three
+    # evaluations and one parabolic step
+    specs = [("U", 0.0, -10.0, 10.0)]
+    calls = []
+
+    def cost(theta):
+        calls.append(float(theta[0]))
+        return (theta[0] - 1.3) ** 2
+
+    assert math.isclose(element_search(cost, specs, [1.0], local=True)[0], 1.3, rel_tol=1e-9)
+    calls.clear()
+    assert element_search(cost, specs, [1.3], local=True) == [1.3] and len(calls) <= 4
 
 
 def test_search_never_ends_above_its_start():

@@ -1,5 +1,6 @@
 """A fit whose cost no longer falls at the resolution of its integration stops at its best point
-(``phs.workflows.identify.solve.STALL``) instead of shrinking its trust region to scipy's step tolerance.
+(``phs.workflows.identify.solve.STALL``, and ``RESOLVED`` where a step's predicted and actual decreases are
+both within the cost's resolution) instead of shrinking its trust region to scipy's step tolerance.
 
 The residual gets a deterministic perturbation of 3e-4 of its RMS at every trial point (seeded by the
 point: a stand-in for the integration's error, which moves with the parameters): near the optimum no
@@ -42,6 +43,7 @@ def _fit():
 
 
 def test_a_stalled_fit_stops_at_its_best_point(noisy_cost, monkeypatch):
+    monkeypatch.setattr(solve, "RESOLVED", 0.0)  # the resolution rule off: the stall rule alone
     fit, truth = _fit()
     assert fit.message.startswith("stalled")
     assert fit.values["R.R"] == pytest.approx(truth.param("R.R").value, rel=1e-2)  # the noisy recording's optimum
@@ -50,3 +52,42 @@ def test_a_stalled_fit_stops_at_its_best_point(noisy_cost, monkeypatch):
     assert not slow.message.startswith("stalled")
     assert fit.iterations < slow.iterations
     assert fit.cost <= slow.cost * (1 + 1e-6)  # and it ended no worse (to the perturbation's size)
+
+
+def test_a_fit_ends_where_its_steps_are_below_the_cost_resolution(noisy_cost, monkeypatch):
+    # the perturbation is read as the cost's resolution (the Jacobian's integration does not carry it), and
+    # the fit ends as soon as a step's predicted and actual decreases fall within it: before the stall rule
+    fit, truth = _fit()
+    assert fit.message.startswith("resolved")
+    assert fit.values["R.R"] == pytest.approx(truth.param("R.R").value, rel=1e-2)
+    monkeypatch.setattr(solve, "RESOLVED", 0.0)
+    stalled, _ = _fit()
+    assert fit.iterations < stalled.iterations
+    assert fit.cost <= stalled.cost * (1 + 1e-6)
+
+
+def _stiff_fit(rtol):
+    """A stiff mass-spring-damper (k = 400, fitted from 380 with the damping) on 4 s of a square and a sine at
+    1 kHz, integrated at ``rtol``: at 1e-5 the integration's error in the cost (about 0.1 at the optimum)
+    is far above the decreases the last steps still find."""
+    from systems.examples import mass_spring_damper as msd
+
+    t = np.linspace(0.0, 4.0, 4001)
+    u = np.where((t % 1.0) < 0.5, 1.0, -0.5) + 0.3 * np.sin(7 * t)
+    y = simulate(msd(k=400.0, b=0.5), t, u={"F": u})["position"]
+    rec = Recording.from_arrays(t, {"F": u, "position": y + 1e-4 * np.random.default_rng(1).standard_normal(len(t))})
+    return identify(msd(k=380.0, b=0.7), rec, ["k.K", "b.b"], rtol=rtol, ftol=1e-12)
+
+
+def test_the_resolution_ends_a_loosely_integrated_fit_early_and_in_the_same_place(monkeypatch):
+    fit = _stiff_fit(1e-5)
+    monkeypatch.setattr(solve, "RESOLVED", 0.0)
+    monkeypatch.setattr(solve, "STALL", 10**9)
+    slow = _stiff_fit(1e-5)
+    assert fit.message.startswith("resolved") and not slow.message.startswith(("resolved", "stalled"))
+    assert fit.iterations < slow.iterations
+    # the same optimum within half a standard error (two fits that each end within the integration's error
+    # of the cost), and the truth within three
+    for k, true in (("k.K", 400.0), ("b.b", 0.5)):
+        assert abs(fit.values[k] - slow.values[k]) < 0.5 * fit.std_errors[k]
+        assert abs(fit.values[k] - true) < 3 * fit.std_errors[k]

@@ -171,6 +171,7 @@ class _Problem:
         self._last = None  # (z bytes, states, window ends) of the last nominal simulation
         self._last_res = None  # (z and defect weight bytes, residual) of the last residual
         self._last_jac = None  # (z and defect weight bytes, residual, Jacobian) of the last Jacobian
+        self.cost_resolution = 0.0  # the cost's resolution at the last Jacobian's point (see _jac)
 
     # -- the coordinates ----------------------------------------------------------------------
     def _params(self, z):
@@ -226,7 +227,10 @@ class _Problem:
     def outputs(self, z) -> np.ndarray:
         """Simulated fitted channels (n_out, N) at ``z``."""
         Z, _ = self._simulate(z)
-        p = self._params(z)[0]
+        return self.outputs_of(Z, self._params(z)[0])
+
+    def outputs_of(self, Z, p) -> np.ndarray:
+        """The fitted channels (n_out, N) of the scaled states ``Z`` (N, nx) under the parameter vector ``p``."""
         return _map_call(self._fy, [Z * self.scale, self.U, np.broadcast_to(p, (self.N, len(p)))], [(self.n_out,)])[0].T
 
     def res(self, z):
@@ -282,6 +286,12 @@ class _Problem:
             raise RuntimeError("non-finite sensitivity")
         Cx, Cp = _map_call(self._fyj, [Z * self.scale, self.U, np.broadcast_to(p, (N, len(p)))],
                            [(nx, self.n_out), (nth, self.n_out)])
+        # the state integrated with its sensitivities took steps of its own (their error is controlled too):
+        # the two costs of one point differ by about the integration's error in the cost, below which a
+        # decrease is not resolved (read by the fit's stopping rule, phs.workflows.identify.solve)
+        r_out = r[: self.n_outputs_residual]
+        r_sens = ((self.outputs_of(Z, p) - self.Ymeas) * self.W[:, None]).reshape(-1)
+        self.cost_resolution = abs(0.5 * float(r_sens @ r_sens - r_out @ r_out))
         # d y_i / d directions = C_x,i dz_i (+ C_p,i dp/dtheta in the theta directions)
         dY = np.matmul(Cx.transpose(0, 2, 1), dZ)  # (N, n_out, nd)
         dY[:, :, :nth] += Cp.transpose(0, 2, 1) * dp
@@ -304,6 +314,20 @@ class _Problem:
             nxt = self._window_columns(k + 1)
             J[rows, nxt] -= wd * np.eye(nx)
         return r, J
+
+    def predicted_decrease(self, z) -> float:
+        """The decrease of the cost ``½|r|²`` from the last Jacobian's point to ``z`` that the residual's
+        linearisation there predicts (the Gauss-Newton model a trust-region step is chosen on); infinite
+        before a first Jacobian."""
+        if self._last_jac is None:
+            return float("inf")
+        key, r, J = self._last_jac
+        at = np.frombuffer(key[:-8], dtype=float)  # the key: the point's bytes, then the defect weight's
+        z = np.asarray(z, dtype=float)
+        if at.shape != z.shape:
+            return float("inf")
+        Jd = J @ (z - at)
+        return -float(r @ Jd + 0.5 * Jd @ Jd)
 
     def _window_columns(self, k) -> slice:
         """Columns of ``z`` that are the start-state directions of window ``k``."""

@@ -34,8 +34,23 @@ tolerance resolves.  (scipy's own step tolerance took 12 such trials, 3.6 s, on 
 refit, ending where it stood.)"""
 
 
+RESOLVED = 2.0
+"""A trial point lowers the cost only by more than this many times the cost's resolution: the two costs of
+a Jacobian's point (the state integrated alone and with its sensitivities, each with error control of its
+own: ``_Problem.cost_resolution``, the largest of the fit's stage) differ by about the integration's error
+in the cost, and a difference of two costs carries two such errors.  A trial point that does not lower the
+cost by more, where the linearisation at the best point predicted no more either (the Gauss-Newton model a
+trust-region step is chosen on: ``_Problem.predicted_decrease``), ends the fit at its best point (message
+``resolved``): no step the model proposes there can be told from the integration's error.  On the EMPS stage
+in its loop (a virtual stiffness of 1.4·10⁶ N/m turns a 10⁻⁸ m error of position into 0.01 N of force) the
+refits' costs wandered by 10⁻⁵ of themselves for 8–10 trial points at rtol 1e-7, each reset by a slightly
+lower one, before :data:`STALL` or ``ftol`` ended them.  Chosen by that argument (two errors in a
+difference), not on a verdict measurement."""
+
+
 class _Stalled(Exception):
-    """Raised inside the residual to end a fit that no longer lowers its cost (:data:`STALL`)."""
+    """Raised inside the residual to end a fit that no longer lowers its cost (:data:`STALL`), or lowers
+    it by less than the integration resolves (:data:`RESOLVED`)."""
 
 
 def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, weights=None, log_scale=None,
@@ -92,7 +107,9 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
     ftol : float
         Stop when the relative decrease of the cost in a step is below this; also stops when
         :data:`STALL` trial points in a row, after a first decrease, do not lower the cost (the
-        integration's resolution reached; message ``stalled``).
+        integration's resolution reached; message ``stalled``), or when a trial point's predicted and
+        actual decreases are both within what the integration resolves (:data:`RESOLVED`; message
+        ``resolved``).
     progress : bool or callable
         Print the cost at each residual evaluation on stderr; a callable is called with the evaluation's
         number and cost instead (a progress bar's hook).
@@ -193,11 +210,22 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
 
     def note(z, cost):
         best["n"] = best.get("n", 0) + 1
-        if cost < best.get("cost", np.inf):
+        best["res"] = max(best.get("res", 0.0), prob.cost_resolution)
+        low, band = best.get("cost", np.inf), RESOLVED * best["res"]
+        if cost < low - band:
             best.update(cost=cost, z=np.array(z, dtype=float), since=0, fell="z" in best)
+            return
+        if cost < low:  # lower, by less than the integration resolves: kept
+            best.update(cost=cost, z=np.array(z, dtype=float))
+        if band > 0 and prob.predicted_decrease(z) <= band:
+            best["why"] = (f"resolved: the step's predicted and actual decreases of the cost are within {RESOLVED:g} "
+                           f"times its resolution at rtol {rtol:g} ({best['res']:.3g})")
+            raise _Stalled
+        if cost < low:
             return
         best["since"] = best.get("since", 0) + 1
         if best.get("fell") and best["since"] >= STALL:
+            best["why"] = f"stalled: {STALL} trial points in a row did not lower the cost"
             raise _Stalled
 
     def fun(z):
@@ -239,8 +267,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
                                                ftol=ftol, xtol=1e-10, gtol=1e-10, max_nfev=max_iter)
             z, nfev, cost, message = sol.x, nfev + sol.nfev, float(sol.cost), str(sol.message)
         except _Stalled:
-            z, nfev, cost = best["z"], nfev + best["n"], best["cost"]
-            message = f"stalled: {STALL} trial points in a row did not lower the cost"
+            z, nfev, cost, message = best["z"], nfev + best["n"], best["cost"], best["why"]
     r, J = prob.jac(z)
     r = np.asarray(r).reshape(-1)[: prob.n_outputs_residual]
     J = np.asarray(J)[: prob.n_outputs_residual]
