@@ -13,7 +13,8 @@ augmented model's structural checks (J skew, R positive semi-definite) and the f
 
 Acceptance rule of a hypothesis (documented in ``docs/explanation/diagnosis.md``, "The steps"): its training BIC is at
 least :data:`MIN_BIC_GAIN` below the nominal model's, and its validation residual (sum over channels of
-RSS / variance) at least :data:`MIN_VALIDATION_GAIN` (relative) below the nominal model's.  Hypotheses
+RSS / variance) at least :data:`MIN_VALIDATION_GAIN` (relative) below the nominal model's, and it lowers no
+channel's validation fit beyond what that channel's noise allows (:func:`~phs.workflows.diagnose.ranking.worsened`).  Hypotheses
 whose validation residual is within :data:`SUFFICIENT_MARGIN` of the best accepted one, and whose training
 residual is within it of the best of those, count as equally good; among them the one with the fewest
 parameters wins (then BIC).

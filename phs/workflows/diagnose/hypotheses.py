@@ -93,6 +93,7 @@ class Scored:
     undetermined: list = field(default_factory=list)   # new parameters along a direction the data do not determine
     deferred: str = ""                   # why a refit of this screened hypothesis waits for the choice (FRICTION_LIKE)
     ftol: float | None = None            # relative cost decrease its fit stopped at (joint fits; see RIVAL_FTOL)
+    worsens: dict = field(default_factory=dict)  # channels whose validation fit it lowers beyond their noise (ranking.worsened)
 
     @property
     def ok(self) -> bool:

@@ -130,6 +130,53 @@ def partial(verdict: dict) -> dict:
     return out
 
 
+WORSE_Z = 2.0
+"""A hypothesis lowers a channel's validation fit beyond what the noise allows when the channel's validation
+residual sum of squares rises by more than this many standard deviations of the part the noise alone moves:
+with ``δ`` the change of the channel's simulated course and ``σ`` its noise level
+(:func:`~phs.workflows.diagnose.mismatch.noise_level`), ``RSS_after − RSS_before = |δ|² − 2 e·δ`` where the
+noise's share of ``e·δ`` has standard deviation ``σ|δ|``; a rise above ``WORSE_Z · 2σ|δ|`` is the model's own
+(:func:`worsened`).  A convention (about 2.3 % of rises that the noise alone makes are taken as the model's), not
+a measurement."""
+
+
+def worsened(reference, h, data) -> dict:
+    """The channels whose validation fit ``h`` lowers beyond what their noise allows against the model it
+    extends (``reference``), as ``{channel: (fit % before, fit % after)}`` (:data:`WORSE_Z`); empty when either
+    has no validation course.  A hypothesis that does is not accepted (:func:`_pick`): it trades one channel
+    for another, which is not the missing physics of both.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from types import SimpleNamespace as NS
+    >>> t = np.linspace(0, 1, 1001); rng = np.random.default_rng(0)
+    >>> y = {"a": np.sin(6 * t) + 0.01 * rng.standard_normal(t.size), "b": np.cos(6 * t) + 0.01 * rng.standard_normal(t.size)}
+    >>> data = NS(outputs=["a", "b"], validation=y, val_mask=np.ones(t.size, bool))
+    >>> ref = NS(simulated={"validation": {"a": 0.9 * np.sin(6 * t), "b": np.cos(6 * t)}}, validation_fit_percent={"a": 90.0, "b": 99.0})
+    >>> better_a = NS(simulated={"validation": {"a": np.sin(6 * t), "b": np.cos(6 * t) + 1e-4}}, validation_fit_percent={"a": 99.0, "b": 98.99})
+    >>> worse_b = NS(simulated={"validation": {"a": np.sin(6 * t), "b": 0.95 * np.cos(6 * t)}}, validation_fit_percent={"a": 99.0, "b": 95.0})
+    >>> worsened(ref, better_a, data), list(worsened(ref, worse_b, data))
+    ({}, ['b'])
+    """
+    from phs.workflows.diagnose.mismatch import noise_level
+
+    before, after = (getattr(reference, "simulated", {}) or {}).get("validation"), (getattr(h, "simulated", {}) or {}).get("validation")
+    if not before or not after:
+        return {}
+    out = {}
+    mask = data.val_mask
+    for ch in data.outputs:
+        if ch not in before or ch not in after:
+            continue
+        y = np.asarray(data.validation[ch], float)[mask]
+        a, b = np.asarray(before[ch], float)[mask], np.asarray(after[ch], float)[mask]
+        rise = float(np.sum((y - b) ** 2) - np.sum((y - a) ** 2))
+        if rise > WORSE_Z * 2.0 * noise_level(y) * float(np.linalg.norm(b - a)):
+            out[ch] = (float(reference.validation_fit_percent[ch]), float(h.validation_fit_percent[ch]))
+    return out
+
+
 def _gain(nominal, h) -> float:
     """Relative decrease of the validation residual against the model it extends (scored on the same data)."""
     ref = h.reference_rss if h.reference_rss is not None else nominal.validation_rss
@@ -186,8 +233,14 @@ def undetermined_effect(h) -> bool:
 
 def _pick(nominal, hyps, data=None):
     """Best accepted hypothesis, preferring fewer parameters among the equally good ones, and Coulomb
-    friction over a hysteresis element that only describes friction (see :data:`FRICTION_LIKE`)."""
+    friction over a hysteresis element that only describes friction (see :data:`FRICTION_LIKE`); with
+    ``data``, none that lowers a channel's validation fit beyond its noise (:func:`worsened`, recorded in
+    ``Scored.worsens``)."""
     acc = [h for h in hyps if _accepted(nominal, h)]
+    if data is not None:  # none that lowers another channel's validation fit beyond its noise (worsened)
+        for h in acc:
+            h.worsens = worsened(nominal, h, data)
+        acc = [h for h in acc if not h.worsens]
     if not acc:
         return None
     # equally good: within the margin of the best on the validation recording and on the training one (on

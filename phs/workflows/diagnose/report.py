@@ -92,6 +92,27 @@ def discovery_lines(discovery) -> list[str]:
     return out
 
 
+def worsening_sentence(hyps) -> str:
+    """What the explanation says of hypotheses that were not accepted because they lower a channel's
+    validation fit beyond what its noise allows (``Scored.worsens``; empty when none did).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> h = NS(augmentation=NS(effect="slew_rate_limit", attached_to="V"), worsens={"x": (94.4, 92.9)},
+    ...        validation_fit_percent={"x": 92.9, "i": 80.0})
+    >>> worsening_sentence([h])
+    " Not accepted, because it lowers another channel's validation fit beyond what that channel's noise allows: slew_rate_limit at V (x 94.40 → 92.90 %)."
+    """
+    bad = [h for h in hyps if getattr(h, "worsens", None)]
+    if not bad:
+        return ""
+    parts = [f"{h.augmentation.effect} at {h.augmentation.attached_to} ("
+             + ", ".join(f"{ch} {a:.2f} → {b:.2f} %" for ch, (a, b) in h.worsens.items()) + ")" for h in bad]
+    return (f" Not accepted, because {'it lowers' if len(bad) == 1 else 'each lowers'} another channel's validation fit beyond "
+            f"what that channel's noise allows: {'; '.join(parts)}.")
+
+
 def failed_sentence(failed, scale: float) -> str:
     """What the explanation says of hypotheses whose fit failed (empty when none did)."""
     if not failed:

@@ -157,7 +157,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     findings = _locate(nominal, system, data, noise)
     pointed = pointers(findings, momentum_states(system))
     current, accepted, all_hyps, rounds = nominal, [], [], []
-    pool = cands
+    pool, located, located_at, pointed_r = cands, findings, nominal, pointed  # the located mismatch of ``located_at``
     for round_ in range(max_effects):
         res = train_result(current, data)
         X = np.asarray(res.x)
@@ -205,8 +205,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             if refit(current, hyps, pick, data_r, progress, f"round {round_ + 1}"):
                 hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
                 pick = _pick(current, hyps, data_r)
-        # the family the located mismatch points at gets full fits when the choice is not of it
-        if round_ == 0 and _refit_pointed(current, hyps, pick, data_r, pointed, progress, f"round {round_ + 1}"):
+        # the family the located mismatch points at gets full fits when the choice is not of it (in a later
+        # round, the mismatch the accepted effects leave, located again)
+        if _refit_pointed(current, hyps, pick, data_r, pointed_r, progress, f"round {round_ + 1}",
+                          named=[a.augmentation.effect for a in accepted]):
             hyps.sort(key=lambda h: (not h.ok, h.stage != "full", -_gain(current, h)))
             pick = _pick(current, hyps, data_r)
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
@@ -221,13 +223,13 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         # a second effect only when the first leaves a structured residual well above the noise
         if not _structured(current, noise, outs):
             break
-        # second round: the most promising other effects of round 1
-        promising = [h.augmentation.effect for h in all_hyps if h.ok and h is not pick and _gain(nominal, h) > 0]
-        pool = [c for c in cands if c.effect in promising[:6] and c.effect != pick.augmentation.effect]
-        if not pool:
-            break
+        # a next round: every candidate gets the chance the first round gave it, against the model with the
+        # accepted effects (the same effect too, at its other places), and the mismatch that model leaves is
+        # located again (what the located family's full fits are chosen on)
+        located, located_at = _locate(current, current.system, data, noise), current
+        pointed_r = pointers(located, momentum_states(system))
     found, dropped = None, []
-    final_findings = _locate(current, current.system, data, noise) if accepted else findings
+    final_findings = located if located_at is current else _locate(current, current.system, data, noise)
     left = _structured(current, noise, outs) or _coloured(final_findings, current, data)
     # automatically only when the library explains too little: an accepted effect that explains at least
     # DISCOVER_BELOW of the mismatch is the verdict, and a correction on top of it would blur it
@@ -266,6 +268,13 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         final_findings = _locate(final, final.system, data, noise)
     failed = [h for r in rounds for h in r if not h.ok]
     verdict = _verdict(nominal, accepted, all_hyps, findings, outs, failed)
+    worse = list({h.label: h for r in rounds for h in r if h.ok and h.worsens}.values())
+    if worse:  # improving hypotheses the choice passed over: each lowers another channel's validation fit
+        from phs.workflows.diagnose.report import worsening_sentence
+
+        verdict["explanation"] += worsening_sentence(worse)
+        verdict["worsened"] = [{"hypothesis": h.label, "channels": {ch: {"before": a, "after": b} for ch, (a, b) in h.worsens.items()}}
+                               for h in worse]
     if found is not None:
         from phs.workflows.diagnose.discover import amend_verdict
 

@@ -114,14 +114,15 @@ def _refit_in_place(current, hyps, screened, data, progress, label) -> None:
         hyps[hyps.index(h)] = f
 
 
-def _refit_pointed(current, hyps, pick, data, pointed, progress, label) -> bool:
+def _refit_pointed(current, hyps, pick, data, pointed, progress, label, named=()) -> bool:
     """When the located mismatch points at a family of effects (:mod:`~phs.workflows.diagnose.consistency`)
-    and the choice ``pick`` (or no choice) is not of it, refit the family's hypotheses that were only
-    screened jointly to convergence, so that the choice weighs them on a full fit (a screening that ended
-    at the nominal model is refitted from its own starts); whether any was refitted."""
+    and neither the choice ``pick`` (or no choice) nor an effect accepted in an earlier round (``named``) is
+    of it, refit the family's hypotheses that were only screened jointly to convergence, so that the choice
+    weighs them on a full fit (a screening that ended at the nominal model is refitted from its own starts);
+    whether any was refitted."""
     from phs.workflows.diagnose.consistency import unmatched
 
-    missing = unmatched(pointed, [pick.augmentation.effect] if pick is not None else [])
+    missing = unmatched(pointed, ([pick.augmentation.effect] if pick is not None else []) + list(named))
     family = {e for p in missing for e in p.effects}
     waiting = [h for h in hyps if h.ok and h.stage != "full" and h.augmentation.effect in family]
     if not waiting:
