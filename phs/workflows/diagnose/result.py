@@ -167,8 +167,10 @@ class Diagnosis(ResultMixin):
                          f"  ->  final {self.final.fit_percent[ch]:.2f} / {self.final.validation_fit_percent[ch]:.2f}")
         st = self.nominal.starts
         if st:
+            from phs.workflows.diagnose.nominal import check_words
+
             lines.append(f"  nominal fit: {st['agreed']} of {st['tried']} starts agree (training cost within 1 %), "
-                         f"best from {st['best']}")
+                         f"best from {st['best']}" + (f"; {check_words(st['check'])}" if st.get("check") else ""))
         if self.weights:
             lines.append("  channel weights: "
                          + ", ".join(f"{ch} {w:.3g}" for ch, w in self.weights.items()))
