@@ -27,6 +27,7 @@ from codegen import Simulator
 from codegen._inputs import initial_state
 from phs.errors import PHSError, SimulationError
 from phs.workflows.diagnose.pool import run_forked
+from phs.workflows.identify.solve import RESOLVED
 from phs.workflows.identify import identify
 
 if TYPE_CHECKING:
@@ -41,7 +42,8 @@ NOMINAL_FTOL = 1e-6
 recording took 5 instead of 19 evaluations, the training cost within 4e-7 of it (lower in one case), the
 BIC within 0.02; the nominal fit 11 s instead of 16 s.  The concealed cases cited are the tests' (seed 1)."""
 AGREE = 0.01
-"""Starts whose fitted training cost is within this relative margin of the best one agree with it.
+"""Starts whose fitted training cost is within this relative margin of the best one (or within the two fits'
+integration resolution of it, ``phs.workflows.identify.solve.RESOLVED``) agree with it.
 Not chosen on a measurement."""
 CHECK_EVALUATIONS = 20
 """Most residual evaluations of the plain least-squares check (:func:`plain_fit`; each is one simulation of
@@ -91,8 +93,8 @@ def fit_nominal(system, data, n_jobs: int = 1) -> tuple[Scored, Data]:
     >>> t = np.linspace(0, 0.02, 401); u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
     >>> rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc_circuit(R=2e3), t, u={"U": u})["v_C"]})
     >>> h, data = fit_nominal(rc_circuit(), Data(rec, rec, np.ones(401, bool), None, ["v_C"], ["R.R"], {}, [], None))
-    >>> round(h.values["R.R"]), h.starts["tried"], h.starts["check"]["kept"]
-    (2000, 2, 'nominal')
+    >>> round(h.values["R.R"]), h.starts["tried"], h.starts["agreed"], h.starts["check"]["kept"]
+    (2000, 2, 2, 'nominal')
     """
     from phs.workflows.diagnose.hypotheses import score
 
@@ -346,7 +348,11 @@ def _best_start(system, data, starts, n_jobs):
     w = dict(fits[0][1].weights)  # every start's residual measured with the same weights
     costs = [sum(float(np.sum(np.asarray(f.residuals[ch]) ** 2)) * w[ch] ** 2 for ch in data.outputs) for _, f in fits]
     k = int(np.argmin(costs))
-    return fits[k][0], fits[k][1], sum(1 for c in costs if c <= costs[k] * (1 + AGREE) + 1e-300), tried
+    # within AGREE of the best, or within what the two fits' integrations resolve (a noise-free recording
+    # fitted to its integration's error: costs of ~1e-10 that differ by a few per cent at the same values)
+    res = [2.0 * RESOLVED * f.cost_resolution for _, f in fits]  # in Σ r², twice the fit's ½ Σ r²
+    agreed = sum(1 for j, c in enumerate(costs) if c <= costs[k] * (1 + AGREE) + res[j] + res[k] + 1e-300)
+    return fits[k][0], fits[k][1], agreed, tried
 
 
 def _state_dict(system, x0) -> dict:

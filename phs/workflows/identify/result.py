@@ -72,6 +72,9 @@ class IdentificationResult(ResultMixin):
     # parameters, then the estimated initial and window states
     factor: np.ndarray | None = field(default=None, repr=False)
     rtol: float = 1e-8
+    # the cost's resolution at the fit's end: about the integration's error in ``cost`` (the difference of the
+    # state integrated alone and with its sensitivities; ``phs.workflows.identify.solve.RESOLVED``)
+    cost_resolution: float = 0.0
 
     def undetermined_beyond(self, names) -> list[str]:
         """The parameters among ``names`` that the data do not tell apart from a re-adjustment of the other

@@ -292,6 +292,7 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         log_scaled=log_scaled, message=message, _recording=recording, compiled=prob.compiled,
         identifiable=ident, unidentifiable=unident,
         factor=relative_factor(J, values, prob.nominal, free, log_scaled), rtol=rtol,
+        cost_resolution=max(best.get("res", 0.0), prob.cost_resolution),
     )
     if validation is not None:
         result.validate(validation)
