@@ -20,8 +20,19 @@ cases).
     python bench/diagnose.py --lab --no-baseline   # lab-protocol recordings, 17 s, five free parameters
     python bench/diagnose.py --lab --quick --no-baseline   # two 3 s lab cases (smoke test)
 
+    python bench/diagnose.py --pairs 20 --no-baseline   # 20 random pairs of effects in one truth
+    python bench/diagnose.py --pairs 2 --seconds 4 --no-baseline   # smoke test of the pairs
+
 The baseline, measured in the same run (``--no-baseline`` skips it), is the same diagnosis without
 screening: every hypothesis fitted jointly to convergence (``refit_top=0``).
+
+``--pairs N [--pair-seed S]`` runs N distinct pairs drawn from ``examples.concealed_effects.PAIRS``
+(:func:`examples.concealed_effects.random_pairs`, seed 0 by default) instead of the single-effect cases:
+each truth holds two effects ``A+B`` at their single-effect strengths.  A verdict is "both named" when
+its effects are exactly the two, "one named" when exactly one of the two is among them; every case
+reports ``truth_effects``, ``named`` (how many of the two the verdict names), ``both_named`` and
+``one_named``, and the JSON line gains ``both_named_rate``, ``one_named_rate``, ``pairs`` and
+``pair_seed`` (``verdict_correct`` is then the both-named rate).
 
 The last line printed is one JSON object: ``seconds_per_case`` (mean), ``max_seconds``,
 ``verdict_correct`` (share of cases whose verdict names the truth's effect), ``cases`` (per case:
@@ -55,7 +66,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from examples import concealed_loops, lab_protocols  # noqa: E402
-from examples.concealed_effects import EFFECTS, NOMINAL_FREE, generate  # noqa: E402
+from examples.concealed_effects import EFFECTS, NOMINAL_FREE, generate, random_pairs  # noqa: E402
 from phs.workflows.diagnose import diagnose  # noqa: E402
 from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
 
@@ -160,6 +171,14 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
 
         def right(d):  # the verdict names the concealed effect
             return d.effect == truth_effect
+    elif "+" in effect:  # a pair of effects in one truth
+        train, info = generate(effect, seconds=seconds, seed=1)
+        val, _ = generate(effect, seconds=seconds, seed=2, validation=True)
+        model, free = electrostatic_actuator(), NOMINAL_FREE
+        pair = info["effects"]
+
+        def right(d):  # both concealed effects named, nothing else
+            return sorted(d.verdict["effects"]) == sorted(pair)
     else:
         train, _ = generate(effect, seconds=seconds, seed=1)
         val, _ = generate(effect, seconds=seconds, seed=2, validation=True)
@@ -173,7 +192,7 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
     d = diagnose(model, train, validation=val, free=list(free), n_jobs=jobs, refit_top=refit_top, **kw)
     sec, cpu = time.perf_counter() - t0, cpu_seconds() - c0
     phases = CLOCK.split(sec, cpu) if CLOCK is not None else None
-    return {
+    out = {
         "seconds": round(sec, 2), "cpu_seconds": round(cpu, 2), "phases": phases,
         "diagnosis_seconds": round(d.seconds, 2), "samples": len(train),
         "hypotheses_fitted": sum(len(r) for r in d.rounds),
@@ -182,6 +201,10 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
         "validation_fit_before": {k: round(v, 2) for k, v in d.nominal.validation_fit_percent.items()},
         "validation_fit_after": {k: round(v, 2) for k, v in d.final.validation_fit_percent.items()},
     }
+    if "+" in effect and not effect.startswith("loop:"):
+        named = sum(e in d.verdict["effects"] for e in pair)
+        out.update(truth_effects=list(pair), named=named, both_named=out["correct"], one_named=named == 1)
+    return out
 
 
 def main(argv=None) -> dict:
@@ -194,7 +217,12 @@ def main(argv=None) -> dict:
                     help="the lab-protocol recordings of examples/lab_protocols.py (17 s by default; --effects picks among them)")
     ap.add_argument("--no-baseline", action="store_true",
                     help="skip the baseline: every hypothesis fitted to convergence (refit_top=0), no screening")
+    ap.add_argument("--pairs", type=int, default=None, metavar="N",
+                    help="run N random pairs of effects (each truth holds two) instead of the single-effect cases")
+    ap.add_argument("--pair-seed", type=int, default=0, help="seed of the random pairs (default 0)")
     args = ap.parse_args(argv)
+    if args.pairs is not None and (args.lab or args.quick):
+        ap.error("--pairs runs the pair cases alone: not with --lab or --quick")
     global CLOCK
     CLOCK = CLOCK or install_clock()
     effects = EFFECTS + LOOPS if args.effects == "all" else [e.strip() for e in args.effects.split(",")]
@@ -210,6 +238,11 @@ def main(argv=None) -> dict:
             effects, seconds = LAB_QUICK, 3.0
     elif args.quick:
         effects, seconds = ["charge_retention", "none"], 4.0
+    if args.pairs is not None:
+        try:
+            effects = random_pairs(args.pairs, args.pair_seed)
+        except ValueError as err:
+            ap.error(str(err))
     cases = {}
     load_start = os.getloadavg() if hasattr(os, "getloadavg") else None
     for e in effects:
@@ -217,8 +250,15 @@ def main(argv=None) -> dict:
         r = run_case(e, seconds, args.jobs)
         r["load_before"] = None if load is None else round(load, 2)
         cases[e] = r
-        print(f"{e:<24} {r['seconds']:7.1f} s  verdict {r['verdict']:<20} {'ok' if r['correct'] else 'WRONG'}  "
-              f"validation fit {r['validation_fit_before']} -> {r['validation_fit_after']}", flush=True)
+        if "truth_effects" in r:
+            said = ("both named" if r["both_named"] else "one named" if r["one_named"]
+                    else "both named among others" if r["named"] == 2 else "neither named")
+            print(f"{e:<40} {r['seconds']:7.1f} s  verdict {'+'.join(r['effects']) or 'nothing missing'}  truth "
+                  f"{'+'.join(r['truth_effects'])}: {said}  validation fit {r['validation_fit_before']} -> "
+                  f"{r['validation_fit_after']}", flush=True)
+        else:
+            print(f"{e:<24} {r['seconds']:7.1f} s  verdict {r['verdict']:<20} {'ok' if r['correct'] else 'WRONG'}  "
+                  f"validation fit {r['validation_fit_before']} -> {r['validation_fit_after']}", flush=True)
         print(f"{'':<24} cpu {r['cpu_seconds']:.1f} s, load {r['load_before']}; wall/cpu s: "
               + ", ".join(f"{p} {v['wall']:.1f}/{v['cpu']:.1f}" for p, v in r["phases"].items()), flush=True)
         if not args.no_baseline:  # the same diagnosis with every hypothesis fitted jointly to convergence
@@ -237,6 +277,10 @@ def main(argv=None) -> dict:
            "load_average_start": None if load_start is None else [round(v, 2) for v in load_start],
            "load_average_end": [round(v, 2) for v in os.getloadavg()] if hasattr(os, "getloadavg") else None,
            "timed_functions": CLOCK.wrapped}
+    if args.pairs is not None:
+        out.update(both_named_rate=sum(c["both_named"] for c in cases.values()) / len(cases),
+                   one_named_rate=sum(c["one_named"] for c in cases.values()) / len(cases),
+                   pairs=list(cases), pair_seed=args.pair_seed)
     if not args.no_baseline:
         base = [c["baseline"]["seconds"] for c in cases.values()]
         out["baseline_seconds_per_case"] = round(sum(base) / len(base), 2)
