@@ -44,7 +44,8 @@ def test_local_search_refines_a_nearby_start_without_the_grid():
 def test_local_search_falls_back_to_the_grid_when_the_minimum_is_far():
     cost, calls = _counted(6.0)
     found = element_search(cost, SPECS, [0.05], local=True)[0]
-    # the bracket around 0.05 s ends at its upper edge: the whole grid then finds 6 s
+    # the bracket around 0.05 s ends at its upper edge with the cost still falling: the grid from there up
+    # (not below it) then finds 6 s
     assert math.isclose(found, 6.0, rel_tol=1e-2)
     assert len(calls) > 18
 
@@ -107,3 +108,13 @@ def test_no_step_beyond_a_minimum_and_none_outside_the_bounds():
     th, vals, _ = extrapolate(_valley, [("a", 0.5, 0.0, 0.7)], ["b"], {"b": (0.0, 0.6)}, ([0.3], {"b": 0.3}), ([0.4], {"b": 0.4}),
                               _valley([0.4], {"b": 0.4}))
     assert th[0] <= 0.7 and vals["b"] <= 0.6
+
+
+def test_local_search_beyond_its_bracket_reads_only_the_grid_the_cost_falls_toward():
+    # the minimum near the range's lower end (a delay of 12 ms from a start at 0.5 s; the bracket is the grid
+    # points 0.25 and 1.42 s either side of the start): the grid points above the bracket (1.42, 3.37, 8 s)
+    # are never evaluated, and of those below it only the ones the cost falls toward
+    cost, calls = _counted(0.012)
+    found = element_search(cost, SPECS, [0.5], local=True)[0]
+    assert math.isclose(found, 0.012, rel_tol=1e-2)
+    assert max(calls) < 1.4

@@ -100,8 +100,8 @@ def _parabola(u, f):
 def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int):
     """A bounded minimum of ``g`` near ``u0`` within ``[lo, hi]``: the points ``u0 ± delta``, then steps
     growing by :data:`LOCAL_GROWTH` downhill until the cost rises (a bracket), then ``steps`` parabolic
-    steps inside it.  Returns ``(u, g(u))``, or None when the cost still falls at ``lo`` or ``hi`` (no
-    valley inside: the caller searches the whole grid)."""
+    steps inside it.  Returns ``(u, g(u))``, or ``(None, side)`` when the cost still falls at ``lo``
+    (``side`` −1) or ``hi`` (+1): no valley inside, the caller searches the grid beyond that end."""
     pts = {u0: g(u0)}
 
     def at(u):
@@ -117,7 +117,7 @@ def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int):
         prev, cur, step = mid, (left if sign < 0 else right), delta
         while True:
             if cur in (lo, hi) and pts[cur] < pts[prev]:
-                return None
+                return None, (-1 if cur == lo else 1)
             step *= LOCAL_GROWTH
             nxt = at(cur + sign * step)
             if not pts[nxt] < pts[cur]:
@@ -144,7 +144,8 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
     round of a joint fit, where the model's refit moved the element's optimum a little): the points
     :data:`LOCAL_SHARE` of a grid step either side, steps downhill until the cost rises, then parabolic
     steps (one per four of ``refine_iter``), never beyond the grid points either side of ``theta``; the
-    whole grid when the cost still falls there (no valley inside) or ``theta`` lies outside the grid."""
+    grid from such a point on when the cost still falls there (no valley inside: the minimum lies that
+    way), the whole grid when ``theta`` lies outside it."""
     import scipy.optimize
 
     theta = [float(v) for v in theta]
@@ -163,7 +164,7 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
                                                options={"xatol": 1e-3 * (c - a), "maxiter": refine_iter})
             return float(r.x), float(r.fun)
 
-        best = None
+        best, beyond = None, ()
         if local and grid[1] <= theta[k] <= grid[-1]:
             i = int(np.argmin(np.abs(grid - theta[k]))) if lo < 0 else int(np.argmin(np.abs(np.log(grid[1:] / theta[k])))) + 1
             a, c = grid[max(i - 1, 1 if grid[0] == 0 else 0)], grid[min(i + 1, len(grid) - 1)]
@@ -174,10 +175,14 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
                 value = (lambda u, x=theta[k], u0=u0: x if u == u0 else math.exp(u))  # the start itself, bit for bit
                 found = _local(lambda u: f1(value(u)), u0, math.log(a), math.log(c),
                                LOCAL_SHARE * math.log(grid[2] / grid[1]), max(1, refine_iter // 4))
-                found = None if found is None else (value(found[0]), found[1])
-            if found is not None:
+                found = found if found[0] is None else (value(found[0]), found[1])
+            if found[0] is not None:
                 best = found
+            else:  # the cost still falls at an end of the bracket: the grid from that end on, the way it falls
+                beyond = grid[grid >= c] if found[1] > 0 else grid[grid <= a]
         if best is None:
+            if local and grid[1] <= theta[k] <= grid[-1] and len(beyond) >= 2:
+                grid = beyond
             vals = [f1(g) for g in grid]
             b = int(np.argmin(vals))
             best = (float(grid[b]), vals[b])

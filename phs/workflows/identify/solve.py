@@ -48,6 +48,15 @@ lower one, before :data:`STALL` or ``ftol`` ended them.  Chosen by that argument
 difference), not on a verdict measurement."""
 
 
+UNRESOLVED = 2
+"""Trial points in a row, after a first real decrease, whose costs lie within :data:`RESOLVED` times the
+cost's resolution of the best (above it: the step's decrease, predicted larger by the linearisation, is
+not seen) after which a fit ends at its best point (message ``resolved``): the trust region has shrunk
+16-fold past the last step whose decrease the integration resolved.  On the EMPS stage in its loop the
+delay's refit after the friction ran 4 such trial points (1.6 s) before :data:`STALL` ended it.  Chosen by
+that argument, not on a verdict measurement."""
+
+
 class _Stalled(Exception):
     """Raised inside the residual to end a fit that no longer lowers its cost (:data:`STALL`), or lowers
     it by less than the integration resolves (:data:`RESOLVED`)."""
@@ -224,6 +233,13 @@ def identify(system, recording, free, *, bounds=None, x0=None, outputs=None, wei
         if cost < low:
             return
         best["since"] = best.get("since", 0) + 1
+        # a trial point within the band either side of the best tells the fit nothing either: two in a row
+        # after a first real decrease end it (its trust region has shrunk 16-fold past the last resolved step)
+        best["unresolved"] = best.get("unresolved", 0) + 1 if cost <= low + band else 0
+        if best.get("fell") and best["unresolved"] >= UNRESOLVED:
+            best["why"] = (f"resolved: {UNRESOLVED} trial points in a row within {RESOLVED:g} times the cost's resolution "
+                           f"at rtol {rtol:g} ({best['res']:.3g}) of the best")
+            raise _Stalled
         if best.get("fell") and best["since"] >= STALL:
             best["why"] = f"stalled: {STALL} trial points in a row did not lower the cost"
             raise _Stalled
