@@ -320,7 +320,7 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
     Discovery
     """
     from phs.workflows.diagnose.hypotheses import through_element
-    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN, worsened
     from phs.workflows.diagnose.screening import _run_all
 
     wall = time.perf_counter()
@@ -350,9 +350,11 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         for h in ok:
             dbic = h.bic - current.bic
             gain = (current.validation_rss - h.validation_rss) / current.validation_rss if current.validation_rss > 0 else 0.0
-            accept = -dbic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and _passes(h)
+            # a term that lowers another channel's validation fit beyond its noise trades channels (ranking.worsened)
+            worse = worsened(current, h, data) if -dbic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN else {}
+            accept = -dbic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and _passes(h) and not worse
             out.steps.append({"term": h.augmentation.component.split(" + ")[-1], "delta_bic": float(dbic), "validation_gain": float(gain),
-                              "accepted": bool(accept)})
+                              "accepted": bool(accept), **({"worsens": {ch: list(v) for ch, v in worse.items()}} if worse else {})})
             if accept:
                 taken = h
                 break
@@ -381,6 +383,10 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         if short and not (base.bic - final.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN):
             chosen = []
             out.reason = "the terms chosen on a window of the training recording did not hold on the whole of it"
+        elif worse := worsened(base, final, data):
+            chosen = []
+            out.reason = ("the correction lowers " + ", ".join(f"{ch}'s validation fit {a:.2f} → {b:.2f} %" for ch, (a, b) in worse.items())
+                          + " beyond what the noise allows")
     if chosen:
         final.stage = "full"
         # the input elements the model's inputs go through stay part of it (their parameters held)
