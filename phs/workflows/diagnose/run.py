@@ -157,7 +157,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     findings = _locate(nominal, system, data, noise)
     pointed = pointers(findings, momentum_states(system))
     current, accepted, all_hyps, rounds = nominal, [], [], []
-    pool, located, located_at, pointed_r = cands, findings, nominal, pointed  # the located mismatch of ``located_at``
+    located, located_at, pointed_r = findings, nominal, pointed  # the located mismatch of ``located_at``
     for round_ in range(max_effects):
         res = train_result(current, data)
         X = np.asarray(res.x)
@@ -170,7 +170,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                    if h.ok and h.element_values and h.stage != "full"}
         earlier.update({(h.augmentation.effect, h.augmentation.attached_to): h for r in rounds for h in r
                         if h.ok and h.element_values and h.stage == "full"})
-        for c in pool:
+        for c in cands:  # every round: the whole pool (an effect accepted earlier too, at its other places)
             # where the recording drives it: an input element where the command varies (inputs driven together as
             # one place), nothing at a signal inside a recorded controller (Candidate.places)
             places = (c.places(current.system, data.recording.signals) if hasattr(c, "places")
