@@ -220,14 +220,13 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         accepted.append(pick)
         current = pick
         data = through_element(data_r, pick)  # what follows (rounds, discovery, final scores) reads its signals
-        # the mismatch the model with the accepted effects leaves, located again: a next round only when something
-        # is left (a residual well above the noise, or one that is not white and not negligible: the test that
-        # sends the diagnosis on to discovery), and what the located family's full fits are chosen on there
-        located, located_at = _locate(current, current.system, data, noise), current
-        if not (_structured(current, noise, outs) or _coloured(located, current, data)):
+        # a second effect only when the first leaves a structured residual well above the noise
+        if not _structured(current, noise, outs):
             break
         # a next round: every candidate gets the chance the first round gave it, against the model with the
-        # accepted effects (the same effect too, at its other places)
+        # accepted effects (the same effect too, at its other places), and the mismatch that model leaves is
+        # located again (what the located family's full fits are chosen on)
+        located, located_at = _locate(current, current.system, data, noise), current
         pointed_r = pointers(located, momentum_states(system))
     found, dropped = None, []
     final_findings = located if located_at is current else _locate(current, current.system, data, noise)
