@@ -201,17 +201,23 @@ def test_a_worker_call_is_abandoned_at_the_signal_and_the_streams_come_back():
         started.wait(30)
         os.kill(os.getpid(), signal.SIGINT)
 
-    worker, streams = Worker(on_abandon=unsilence), (sys.stdout, sys.stderr)
-    assert worker(sum, [1, 2]) == 3  # an ordinary call: its value
-    with watching():
-        threading.Thread(target=signal_when_started, daemon=True).start()
-        begin = time.monotonic()
-        with pytest.raises(Interrupted) as info:
-            worker(blocking)
-        seconds = time.monotonic() - begin
-        assert (sys.stdout, sys.stderr) == streams  # given back at once though the call still holds its quiet()
-    release.set()
-    assert finished.wait(30) and seen == [streams[1]]  # the abandoned call silences no more
-    assert info.value.exit_code == 130 and seconds < 5, seconds  # at once, not after the call's 30 s
-    assert worker(sum, [3, 4]) == 7  # a new thread serves the next call
-    worker.close()
+    # a runner launched in the background inherits SIGINT ignored, which watching() keeps ignored: the test
+    # sends it to itself, so it starts from Python's own handler (restored after)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        worker, streams = Worker(on_abandon=unsilence), (sys.stdout, sys.stderr)
+        assert worker(sum, [1, 2]) == 3  # an ordinary call: its value
+        with watching():
+            threading.Thread(target=signal_when_started, daemon=True).start()
+            begin = time.monotonic()
+            with pytest.raises(Interrupted) as info:
+                worker(blocking)
+            seconds = time.monotonic() - begin
+            assert (sys.stdout, sys.stderr) == streams  # given back at once though the call still holds its quiet()
+        release.set()
+        assert finished.wait(30) and seen == [streams[1]]  # the abandoned call silences no more
+        assert info.value.exit_code == 130 and seconds < 5, seconds  # at once, not after the call's 30 s
+        assert worker(sum, [3, 4]) == 7  # a new thread serves the next call
+        worker.close()
+    finally:
+        signal.signal(signal.SIGINT, previous)
