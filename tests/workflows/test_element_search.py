@@ -118,3 +118,39 @@ def test_local_search_beyond_its_bracket_reads_only_the_grid_the_cost_falls_towa
     found = element_search(cost, SPECS, [0.5], local=True)[0]
     assert math.isclose(found, 0.012, rel_tol=1e-2)
     assert max(calls) < 1.4
+
+
+def test_local_search_toward_the_ranges_end_stops_there():
+    # the cost falls all the way to the range's upper end (a saturation limit above every command): the
+    # local search walks up to the last grid point and takes it, without the whole grid (nine points more
+    # and Brent's refinement); the start, the points either side, the walk's steps
+    cost, calls = _counted(50.0)  # beyond the range's end at 8 s
+    found = element_search(cost, SPECS, [5.0], local=True)[0]
+    assert found == 8.0
+    assert len(calls) <= 6 and min(calls) > 3.3  # never below the grid point under the start (3.37 s)
+
+
+def test_a_parabolic_step_promising_less_than_the_resolution_is_not_taken():
+    # a quadratic cost in the parameter itself: its parabola is exact, so a step is skipped only when its
+    # whole gain lies below the resolution, and the point kept is within the resolution of the minimum
+    specs = [("U", 0.0, -10.0, 10.0)]
+    calls = []
+
+    def cost(theta):
+        calls.append(float(theta[0]))
+        return 100.0 + (theta[0] - 1.3) ** 2
+
+    exact = element_search(cost, specs, [1.2], local=True)[0]
+    n_exact = len(calls)
+    calls.clear()
+    resolution = 0.05  # the start's excess over the minimum is 0.01: below it
+    coarse = element_search(cost, specs, [1.2], local=True, resolution=resolution)[0]
+    assert math.isclose(exact, 1.3, rel_tol=1e-9)
+    assert coarse == 1.2 and len(calls) < n_exact
+    assert cost([coarse]) - 100.0 <= resolution
+    calls.clear()
+    # from farther away the walk brackets the minimum with its best point 0.035 above it: within a resolution
+    # of 0.05 that point is kept, with 0.01 the parabolic step is taken, to the minimum
+    far = element_search(cost, specs, [0.8], local=True, resolution=resolution)[0]
+    assert far != 1.3 and cost([far]) - 100.0 <= resolution
+    assert math.isclose(element_search(cost, specs, [0.8], local=True, resolution=0.01)[0], 1.3, rel_tol=1e-9)

@@ -87,21 +87,28 @@ neighbouring points (a golden-section expansion, as in :func:`scipy.optimize.bra
 
 
 def _parabola(u, f):
-    """The vertex of the parabola through three points ``u[0] < u[1] < u[2]`` with ``f[1]`` lowest, or
-    the middle point when they are collinear or the vertex falls outside."""
+    """The vertex of the parabola through three points ``u[0] < u[1] < u[2]`` with ``f[1]`` lowest and the
+    parabola's value there, or the middle point and its value when they are collinear or the vertex falls
+    outside."""
     (a, b, c), (fa, fb, fc) = u, f
     den = (b - a) * (fb - fc) - (b - c) * (fb - fa)
     if den == 0 or not math.isfinite(den):
-        return b
+        return b, fb
     v = b - 0.5 * ((b - a) ** 2 * (fb - fc) - (b - c) ** 2 * (fb - fa)) / den
-    return v if a < v < c else b
+    if not a < v < c:
+        return b, fb
+    # Lagrange's form of the parabola through the three points, at v
+    fv = (fa * (v - b) * (v - c) / ((a - b) * (a - c)) + fb * (v - a) * (v - c) / ((b - a) * (b - c))
+          + fc * (v - a) * (v - b) / ((c - a) * (c - b)))
+    return v, fv
 
 
-def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int):
+def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int, resolution: float = 0.0):
     """A bounded minimum of ``g`` near ``u0`` within ``[lo, hi]``: the points ``u0 ± delta``, then steps
     growing by :data:`LOCAL_GROWTH` downhill until the cost rises (a bracket), then ``steps`` parabolic
-    steps inside it.  Returns ``(u, g(u))``, or ``(None, side)`` when the cost still falls at ``lo``
-    (``side`` −1) or ``hi`` (+1): no valley inside, the caller searches the grid beyond that end."""
+    steps inside it, each only while the parabola promises a decrease of more than ``resolution``.
+    Returns ``(u, g(u), side)``: ``side`` 0 for a minimum inside, −1 or +1 when the cost still falls at
+    ``lo`` or ``hi`` (then ``u`` is that end: no valley inside, the caller searches beyond it)."""
     pts = {u0: g(u0)}
 
     def at(u):
@@ -117,7 +124,7 @@ def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int):
         prev, cur, step = mid, (left if sign < 0 else right), delta
         while True:
             if cur in (lo, hi) and pts[cur] < pts[prev]:
-                return None, (-1 if cur == lo else 1)
+                return cur, pts[cur], (-1 if cur == lo else 1)
             step *= LOCAL_GROWTH
             nxt = at(cur + sign * step)
             if not pts[nxt] < pts[cur]:
@@ -125,8 +132,8 @@ def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int):
                 break
             prev, cur = cur, nxt
     for _ in range(steps):
-        v = _parabola((left, mid, right), (pts[left], pts[mid], pts[right]))
-        if abs(v - mid) <= 1e-3 * (right - left):
+        v, promised = _parabola((left, mid, right), (pts[left], pts[mid], pts[right]))
+        if abs(v - mid) <= 1e-3 * (right - left) or not pts[mid] - promised > resolution:
             break
         v = at(v)
         if pts[v] < pts[mid]:  # the new best: the bracket closes on it
@@ -134,10 +141,11 @@ def _local(g, u0: float, lo: float, hi: float, delta: float, steps: int):
             mid = v
         else:
             left, right = (left, v) if v > mid else (v, right)
-    return mid, pts[mid]
+    return mid, pts[mid], 0
 
 
-def element_search(cost, specs, theta, local: bool = False, refine_iter: int = REFINE_ITER) -> list[float]:
+def element_search(cost, specs, theta, local: bool = False, refine_iter: int = REFINE_ITER,
+                   resolution: float = 0.0) -> list[float]:
     """Each of an input element's parameters in turn: a coarse grid over its range (log-spaced where the
     range is positive, with 0 when the range starts there), then a bounded refinement around the best grid
     point; never ends above the cost of ``theta`` itself.  ``local``: a search near ``theta`` only (a later
@@ -145,7 +153,9 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
     :data:`LOCAL_SHARE` of a grid step either side, steps downhill until the cost rises, then parabolic
     steps (one per four of ``refine_iter``), never beyond the grid points either side of ``theta``; the
     grid from such a point on when the cost still falls there (no valley inside: the minimum lies that
-    way), the whole grid when ``theta`` lies outside it."""
+    way; that point itself when it is the grid's end), the whole grid when ``theta`` lies outside it.
+    ``resolution``: the least decrease of the cost a parabolic step of the local search must promise to be
+    taken (a smaller one moves the parameter within what the data resolve)."""
     import scipy.optimize
 
     theta = [float(v) for v in theta]
@@ -169,19 +179,25 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
             i = int(np.argmin(np.abs(grid - theta[k]))) if lo < 0 else int(np.argmin(np.abs(np.log(grid[1:] / theta[k])))) + 1
             a, c = grid[max(i - 1, 1 if grid[0] == 0 else 0)], grid[min(i + 1, len(grid) - 1)]
             if lo < 0:  # the search in the parameter itself
-                found = _local(f1, theta[k], a, c, LOCAL_SHARE * (grid[1] - grid[0]), max(1, refine_iter // 4))
+                u, cu, side = _local(f1, theta[k], a, c, LOCAL_SHARE * (grid[1] - grid[0]), max(1, refine_iter // 4),
+                                     resolution)
             else:  # in its logarithm
-                u0 = math.log(theta[k])
-                value = (lambda u, x=theta[k], u0=u0: x if u == u0 else math.exp(u))  # the start itself, bit for bit
-                found = _local(lambda u: f1(value(u)), u0, math.log(a), math.log(c),
-                               LOCAL_SHARE * math.log(grid[2] / grid[1]), max(1, refine_iter // 4))
-                found = found if found[0] is None else (value(found[0]), found[1])
-            if found[0] is not None:
-                best = found
-            else:  # the cost still falls at an end of the bracket: the grid from that end on, the way it falls
-                beyond = grid[grid >= c] if found[1] > 0 else grid[grid <= a]
+                u0, ua, uc = math.log(theta[k]), math.log(a), math.log(c)
+
+                def value(u, x=theta[k], u0=u0, ua=ua, uc=uc, a=a, c=c):
+                    """The start and the bracket's ends themselves, bit for bit (points the grid shares)."""
+                    return x if u == u0 else a if u == ua else c if u == uc else math.exp(u)
+
+                u, cu, side = _local(lambda u, value=value: f1(value(u)), u0, ua, uc,
+                                     LOCAL_SHARE * math.log(grid[2] / grid[1]), max(1, refine_iter // 4), resolution)
+                u = value(u)
+            # the cost still falls at an end of the bracket: the grid from that end on, the way it falls, or
+            # that end itself when it is the grid's (the range's) end
+            beyond = () if side == 0 else grid[grid >= c] if side > 0 else grid[grid <= a]
+            if len(beyond) < 2:
+                best = (float(u), cu)
         if best is None:
-            if local and grid[1] <= theta[k] <= grid[-1] and len(beyond) >= 2:
+            if len(beyond) >= 2:
                 grid = beyond
             vals = [f1(g) for g in grid]
             b = int(np.argmin(vals))

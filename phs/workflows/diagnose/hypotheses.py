@@ -457,8 +457,8 @@ delay in its heater drives, the nominal fit softens the backbone by 5 %, the sea
 finds 1.33 s, and the refit through 1.33 s stops at a stiffness between the two (validation fit 86.4 %);
 alternating reaches the concealed delay (``docs/systems/hydrogel_arm.md``).  Screening fits run one round."""
 ELEMENT_TOL = 1e-3
-"""Relative decrease of the training cost below which the rounds of an input element's fit stop.
-Not chosen on a measurement."""
+"""Relative decrease of the training cost below which the rounds of an input element's fit stop: a round's
+whole decrease, or its element search's after the model's refit.  Not chosen on a measurement."""
 
 
 def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool = True, max_iter: int | None = None,
@@ -474,6 +474,10 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
     rtol = _fit_rtol(data, joint)
+    # a local search's parabolic step is taken only when it promises more than one residual sample's share
+    # of the cost (the cost's change over a parameter's standard error, Δχ² = 1, when the residual is the
+    # noise): a smaller step moves the element within what the data resolve
+    n_res = max(1, len(rec.t) * len(outs))
     from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
     def cost_of(system, x0):
@@ -501,8 +505,8 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         ``(theta, values, x0, recovery, training cost)``."""
         cost = cost_of(base.with_params(values), x0)
         refine = REFINE_ITER if joint else SCREEN_REFINE_ITER
-        theta = (element_search(cost, specs, first, local=True, refine_iter=refine) if first is not None
-                 else element_search(cost, specs, [s[1] for s in specs], refine_iter=refine))
+        theta = (element_search(cost, specs, first, local=True, refine_iter=refine, resolution=cost(first) / n_res)
+                 if first is not None else element_search(cost, specs, [s[1] for s in specs], refine_iter=refine))
         if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
             theta = [float(v) for v in neutral]
         recovery = ""
@@ -529,9 +533,12 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
                     break
                 if before - refitted <= ELEMENT_TOL * before and not stepped:  # the model hardly moved: neither will the element
                     break
-                theta = element_search(cost, specs, theta, local=True)
+                theta = element_search(cost, specs, theta, local=True, resolution=refitted / n_res)
                 after = cost(theta)
-                if before - after <= ELEMENT_TOL * before:
+                # the round gained little, or the element's search after the refit did: the element hardly
+                # moved, and a next refit through it gains less still (alternating minimisation's gains
+                # shrink from one half-step to the next)
+                if before - after <= ELEMENT_TOL * before or refitted - after <= ELEMENT_TOL * refitted:
                     break
                 moved = extrapolate(cost_of(base, x0), specs, data.free, data.bounds, start, (theta, values), after, ELEMENT_TOL)
                 stepped = moved is not None  # the element was not searched at the stepped model: the next round does
