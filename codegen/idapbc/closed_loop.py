@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
-from codegen._solver_errors import describe
+from codegen._solver_errors import CODES, describe, failure_code
 from codegen.functions import generate
 from codegen.idapbc.model import state_vector
 from codegen.results import signal, write_csv_atomic
@@ -351,7 +351,8 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     DomainError
         When the plant leaves its validity domain (time, condition and state named).
     SimulationError
-        When the integrator fails.
+        When the integrator fails; its attribute ``out_of_budget`` is True when the run was stopped by
+        ``max_steps`` or ``seconds`` (unfinished: its outcome unknown) rather than by the model.
 
     Examples
     --------
@@ -426,14 +427,18 @@ def simulate_closed_loop(ctrl, t, *, x0=None, plant=None, params: dict | None = 
     try:
         out = _timed(lambda: F(x0=z0), seconds)
     except _OutOfTime:
-        raise SimulationError(f"closed-loop simulation of {plant.name!r} under {ctrl.name!r} did not finish in "
+        err = SimulationError(f"closed-loop simulation of {plant.name!r} under {ctrl.name!r} did not finish in "
                               f"{seconds:g} CPU seconds (t = {t[0]:g}..{t[-1]:g} s from "
                               + ", ".join(f"{nm}={v:.4g}" for nm, v in list(zip(plant.state_names, xs))[:4])
-                              + (", ..." if n > 4 else "") + "): the closed loop is too fast or stiff there") from None
+                              + (", ..." if n > 4 else "") + "): the closed loop is too fast or stiff there")
+        err.out_of_budget = True  # the run was not finished, not refused: its outcome is unknown
+        raise err from None
     except RuntimeError as exc:
         k, zk = _reached(F, z0, len(t) - 1)  # the last output time the integrator got to, and the state there
-        raise SimulationError(describe(exc, plant, t0=float(t[k]), t1=float(t[k + 1]), x=zk[:n] * s, p=p, max_steps=max_steps,
-                                       subject=f"closed-loop simulation of {plant.name!r} under {ctrl.name!r}")) from None
+        err = SimulationError(describe(exc, plant, t0=float(t[k]), t1=float(t[k + 1]), x=zk[:n] * s, p=p, max_steps=max_steps,
+                                       subject=f"closed-loop simulation of {plant.name!r} under {ctrl.name!r}"))
+        err.out_of_budget = CODES.get(failure_code(str(exc))) == "work"  # its step limit, not a failure of the model
+        raise err from None
     Zs = np.hstack([z0[:, None], np.asarray(out["xf"], dtype=float)]).T
     if not np.all(np.isfinite(Zs)):
         k = int(np.argmax(~np.all(np.isfinite(Zs), axis=1)))

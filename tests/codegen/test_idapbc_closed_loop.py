@@ -123,11 +123,53 @@ def test_a_run_over_its_cpu_budget_stops_with_one_line(ctrl):
     assert ctrl.simulate(np.linspace(0.0, 1.0, 11), seconds=30.0).x.shape == (11, 2)  # a short run is unaffected
 
 
-def test_a_certificate_run_over_the_step_limit_fails_and_says_so(ctrl, monkeypatch):
+def test_a_certificate_run_over_the_step_limit_is_undecided_and_says_so(ctrl, monkeypatch):
+    """A run stopped by its step limit is not finished: its outcome is unknown, so it neither passes nor fails the
+    runs' certificate; the set is shrunk below its start (three rounds), after which the runs and the region are
+    undecided."""
     import codegen.idapbc.certificates as certificates
 
     assert ctrl.certify(rays=4, simulations=1).passed
     monkeypatch.setattr(certificates, "RUN_STEPS", 3)  # fewer steps than any output interval needs
-    sims = next(c for c in ctrl.certify(rays=4, simulations=1).items if c.name == "simulations")
-    assert sims.verdict == "fail"
-    assert "maximum number of internal steps (3)" in sims.summary and sims.numbers["failed"] == 1
+    items = {c.name: c for c in ctrl.certify(rays=4, simulations=1).items}
+    sims, region = items["simulations"], items["region"]
+    assert sims.verdict == "undecided" and region.verdict == "undecided"
+    assert "maximum number of internal steps (3)" in sims.summary and "not finished within the runs' budget" in sims.summary
+    assert sims.numbers["failed"] == 0 and len(sims.numbers["unfinished"]) == 1
+    # three rounds, each from a start below UNFINISHED_SHRINK of the last unfinished one's level
+    levels = region.numbers["unfinished_levels"]
+    assert len(levels) == 3 and all(b <= certificates.UNFINISHED_SHRINK * a * (1 + 1e-12) for a, b in zip(levels, levels[1:]))
+    assert region.numbers["c"] == pytest.approx(certificates.UNFINISHED_SHRINK * levels[-1])
+
+
+def test_runs_that_cannot_be_finished_shrink_the_set_until_the_runs_pass(ctrl, monkeypatch):
+    """Starts above a level whose runs stop at the budget (as against a material's steep wall) leave the set
+    shrunk below them; the runs from inside the smaller set finish, reach x*, and both certificates pass on it."""
+    import codegen.idapbc.certificates as certificates
+    from phs.errors import SimulationError
+
+    full = {c.name: c for c in ctrl.certify(rays=4, simulations=2).items}["region"].numbers["c"]
+    wall = 0.2 * full  # runs from above a fifth of the estimated set's level cannot be finished
+    real = certificates.simulate_closed_loop
+
+    def budgeted(c, t, x0=None, **kw):
+        if c.H_d(x0) > wall:
+            err = SimulationError("closed-loop simulation of 'msd_l0': it took its maximum number of internal steps")
+            err.out_of_budget = True
+            raise err
+        return real(c, t, x0=x0, **kw)
+
+    monkeypatch.setattr(certificates, "simulate_closed_loop", budgeted)
+    items = {c.name: c for c in ctrl.certify(rays=4, simulations=2).items}
+    region, sims = items["region"], items["simulations"]
+    assert sims.verdict == "pass" and region.verdict == "pass"
+    assert region.numbers["unfinished_levels"] and min(region.numbers["unfinished_levels"]) > wall
+    assert region.numbers["c"] < full and "could not be finished within the runs' budget" in region.summary
+
+
+def test_the_step_limit_marks_the_error_as_unfinished(ctrl):
+    from phs.errors import SimulationError
+
+    with pytest.raises(SimulationError) as info:
+        simulate_closed_loop(ctrl, np.linspace(0.0, 1.0, 3), max_steps=2)
+    assert info.value.out_of_budget is True
