@@ -94,6 +94,7 @@ class Scored:
     deferred: str = ""                   # why a refit of this screened hypothesis waits for the choice (FRICTION_LIKE)
     ftol: float | None = None            # relative cost decrease its fit stopped at (joint fits; see RIVAL_FTOL)
     worsens: dict = field(default_factory=dict)  # channels whose validation fit it lowers beyond their noise (ranking.worsened)
+    later_share: float | None = None  # in a later round: the share of what the nominal model misses it adds (run.LATER_SHARE)
 
     @property
     def ok(self) -> bool:

@@ -27,8 +27,8 @@ from codegen import Simulator
 from codegen._inputs import initial_state
 from phs.errors import PHSError, SimulationError
 from phs.workflows.diagnose.pool import run_forked
-from phs.workflows.identify.solve import RESOLVED
 from phs.workflows.identify import identify
+from phs.workflows.identify.solve import RESOLVED
 
 if TYPE_CHECKING:
     from phs.workflows.diagnose.hypotheses import Data, Scored

@@ -113,6 +113,28 @@ def worsening_sentence(hyps) -> str:
             f"what that channel's noise allows: {'; '.join(parts)}.")
 
 
+def small_share_sentence(hyps, least: float) -> str:
+    """What the explanation says of later-round hypotheses that passed the acceptance rule but were not
+    named, because beyond the accepted effects they explain less than ``least`` of what the nominal model
+    misses above the noise (``Scored.later_share``; empty when none).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> h = NS(augmentation=NS(effect="hysteresis", attached_to="m.p"), later_share=0.0225)
+    >>> s = small_share_sentence([h], 0.1)
+    >>> s.startswith(" Also fitted after the accepted effects but not named: hysteresis at m.p adds 2.2 % of what")
+    True
+    >>> s.endswith("(a named effect adds at least 10 %).")
+    True
+    """
+    if not hyps:
+        return ""
+    parts = [f"{h.augmentation.effect} at {h.augmentation.attached_to} adds {100 * h.later_share:.2g} %" for h in hyps]
+    return (f" Also fitted after the accepted effects but not named: {'; '.join(parts)} of what the nominal model misses "
+            f"(a named effect adds at least {100 * least:.2g} %).")
+
+
 def failed_sentence(failed, scale: float) -> str:
     """What the explanation says of hypotheses whose fit failed (empty when none did)."""
     if not failed:
