@@ -93,7 +93,7 @@ class Scored:
     undetermined: list = field(default_factory=list)   # new parameters along a direction the data do not determine
     deferred: str = ""                   # why a refit of this screened hypothesis waits for the choice (FRICTION_LIKE)
     ftol: float | None = None            # relative cost decrease its fit stopped at (joint fits; see RIVAL_FTOL)
-    worsens: dict = field(default_factory=dict)  # channels whose validation fit it lowers beyond their noise (ranking.worsened)
+    worsens: dict = field(default_factory=dict)  # channels whose validation fit falls beyond their noise (ranking.worsened)
     later_share: float | None = None  # in a later round: the share of what the nominal model misses it adds (run.LATER_SHARE)
 
     @property
@@ -442,12 +442,8 @@ def _fixed(weights):
 
 
 def _default_log(system, free) -> list:
-    out = []
-    for k in free:
-        p = system.param(k)
-        if p.value > 0 and p.range and p.range[0] > 0 and p.range[1] / p.range[0] >= 10**1.5:
-            out.append(k)
-    return out
+    ps = [system.param(k) for k in free]
+    return [p.name for p in ps if p.value > 0 and p.range and p.range[0] > 0 and p.range[1] / p.range[0] >= 10**1.5]
 
 
 ELEMENT_ROUNDS = 8
@@ -475,10 +471,8 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
     rtol = _fit_rtol(data, joint)
-    # a local search's parabolic step is taken only when it promises more than one residual sample's share
-    # of the cost (the cost's change over a parameter's standard error, Δχ² = 1, when the residual is the
-    # noise): a smaller step moves the element within what the data resolve
-    n_res = max(1, len(rec.t) * len(outs))
+    # a local search's parabolic step only when it promises more than one residual sample's share of the cost
+    n_res = max(1, len(rec.t) * len(outs))  # (Δχ² = 1 when the residual is the noise: within the standard error)
     from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
     def cost_of(system, x0):
@@ -536,9 +530,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
                     break
                 theta = element_search(cost, specs, theta, local=True, resolution=refitted / n_res)
                 after = cost(theta)
-                # the round gained little, or the element's search after the refit did: the element hardly
-                # moved, and a next refit through it gains less still (alternating minimisation's gains
-                # shrink from one half-step to the next)
+                # the round, or the search after the refit, gained little: a next refit gains less still
                 if before - after <= ELEMENT_TOL * before or refitted - after <= ELEMENT_TOL * refitted:
                     break
                 moved = extrapolate(cost_of(base, x0), specs, data.free, data.bounds, start, (theta, values), after, ELEMENT_TOL)
