@@ -138,3 +138,133 @@ def add_heated_dissipation(system, state: str, conductance: sp.Expr, heat: State
     H = EnergyTerm(f"{label}:heat", E / s_ * (a - sp.log(1 + a) - c0))
     diss = [(label, {(i, i): conductance}), (f"{label}:heat", {(n, n): relax})]
     return _add_states(system, [heat], [H], J, R, params, diss, effect)
+
+
+def add_mode(system, body: str, mass_ratio: sp.Expr, frequency: sp.Expr, damping_ratio: sp.Expr, mass: sp.Expr,
+             deflection: StateInfo, momentum: StateInfo, params, effect: str, label: str = "") -> PHSystem:
+    """``system`` with a second mass ``μ m`` joined to the body of momentum ``body`` by a spring and a
+    damper: one more mechanical mode (a flexible part, a payload on a compliant mount).
+
+    ``mass`` is the body's mass scale ``m``, ``mass_ratio`` ``μ``, ``frequency`` the mode's natural
+    frequency ``f`` [Hz] and ``damping_ratio`` ``ζ``; ``ω = 2πf``.  Two new states: ``deflection`` ``δ``
+    (the mode's position relative to the body) and ``momentum`` ``w = p_a/μ`` (the mode's momentum per unit
+    mass ratio, so its scale is the body's own whatever ``μ``), with
+
+    ``H += μ m ω² δ²/2 + μ w²/(2m)``, ``J[δ, w] = 1/μ``, ``J[δ, p] = −1`` (``δ̇ = v_a − v``),
+    ``R = c vvᵀ`` on ``(p, w)`` with ``v = (1, −1/μ)`` and ``c = 2ζωμm`` (the damper on the relative
+    velocity ``v_a − v``).  ``J`` stays skew and ``R`` positive semi-definite; the mode's energy is a
+    positive quadratic: passive by construction.  ``μ → 0`` is the model without the mode (its force
+    ``μ m (ω² δ + 2ζω(v_a − v))`` on the body vanishes while ``δ`` and ``w`` stay bounded).
+
+    Returns
+    -------
+    PHSystem
+        With ``deflection`` and ``momentum`` appended as the last two states (start them at 0: the mode at rest).
+
+    Examples
+    --------
+    >>> from systems.examples import mass_spring_damper
+    >>> from phs import Param
+    >>> mu, f, z = Param("mu", 0.3, "1", "mass ratio"), Param("f", 5.0, "Hz", "frequency"), Param("z", 0.05, "1", "damping ratio")
+    >>> d = StateInfo("mode.delta", "m", (-1.0, 1.0), "mode deflection", "C", 0.01)
+    >>> w = StateInfo("mode.w", "kg*m/s", (-10.0, 10.0), "mode momentum per mass ratio", "I", 0.1)
+    >>> m = Param("m_s", 1.0, "kg", "mass scale")
+    >>> s = add_mode(mass_spring_damper(), "m.p", mu.symbol, f.symbol, z.symbol, m.symbol, d, w, [mu, f, z, m], "mode")
+    >>> s.state_names[-2:], s.check().ok
+    (['mode.delta', 'mode.w'], True)
+    """
+    n = len(system.states)
+    i = system.state_names.index(body)
+    label = label or f"{effect}@{body}"
+    w_ = 2 * sp.pi * frequency
+    c = 2 * damping_ratio * w_ * mass  # the damper's coefficient divided by μ
+    J = sp.zeros(n + 2, n + 2)
+    R = sp.zeros(n + 2, n + 2)
+    J[n, n + 1], J[n + 1, n] = 1 / mass_ratio, -1 / mass_ratio
+    J[n, i], J[i, n] = -1, 1
+    R[i, i] = c * mass_ratio
+    R[i, n + 1] = R[n + 1, i] = -c
+    R[n + 1, n + 1] = c / mass_ratio
+    d, w = deflection.symbol, momentum.symbol
+    H = [EnergyTerm(f"{label}:spring", mass_ratio * mass * w_**2 * d**2 / 2), EnergyTerm(f"{label}:mass", mass_ratio * w**2 / (2 * mass))]
+    diss = [(label, {(i, i): c * mass_ratio, (i, n + 1): -c, (n + 1, n + 1): c / mass_ratio})]
+    return _add_states(system, [deflection, momentum], H, J, R, params, diss, effect)
+
+
+def add_clock(system, clock: StateInfo, tau: sp.Expr, energy: sp.Expr, params, effect: str, label: str = "") -> PHSystem:
+    """``system`` with a slow state ``s`` (``clock``) that relaxes from 0 towards 1 with time constant
+    ``tau``: the drift of whatever the caller then scales by ``s`` (a stiffness heating up, a drive
+    weakening), so a drifting parameter is a state of the model, not a function of time.
+
+    ``H += E (s − 1)²/2`` with ``E`` = ``energy`` and ``R[s, s] = 1/(τ E)``: ``ṡ = (1 − s)/τ`` minus
+    the derivative of whatever energy the caller makes depend on ``s``, over ``τE`` (negligible when
+    ``E`` is large against it).  The clock releases the energy ``E/2`` it holds at ``s = 0``; ``R ⪰ 0`` and
+    the energy is bounded below: passive by construction.
+
+    Returns
+    -------
+    PHSystem
+        With ``clock`` appended as the last state (start it at 0).
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> from phs import Param
+    >>> tau, E = Param("tau", 5.0, "s", "drift time constant"), Param("E", 1.0, "J", "energy scale")
+    >>> clock = StateInfo("clock", "1", (-0.5, 1.5), "drift", "C", 1.0)
+    >>> s = add_clock(rc_circuit(), clock, tau.symbol, E.symbol, [tau, E], "drift")
+    >>> s.state_names[-1], s.check().ok
+    ('clock', True)
+    """
+    n = len(system.states)
+    label = label or f"{effect}@{clock.name}"
+    J = sp.zeros(n + 1, n + 1)
+    R = sp.zeros(n + 1, n + 1)
+    R[n, n] = 1 / (tau * energy)
+    H = [EnergyTerm(label, energy * (clock.symbol - 1) ** 2 / 2)]
+    return _add_states(system, [clock], H, J, R, params, [(label, {(n, n): R[n, n]})], effect)
+
+
+def limit_input_current(system, input_name: str, limit: sp.Expr, knee: sp.Expr, capacitance: sp.Expr, charge: StateInfo, params,
+                        effect: str) -> PHSystem:
+    """``system`` whose effort input ``input_name`` delivers at most ``limit`` of its conjugate flow (a
+    drive's current limit): an element in series with the source whose conductance passes the flow
+    ``i = I tanh(e/e_k)`` at the voltage ``e`` across it (``I`` = ``limit``, ``e_k`` = ``knee``), with a
+    capacitance ``capacitance`` across it holding the charge ``charge`` (its voltage ``e = Q/C``).
+
+    Below the limit the element is a resistance ``e_k / I`` (small when the knee is small); near it the
+    voltage across it rises until the flow the model draws is the limit.  The conductance
+    ``I tanh(e/e_k)/e`` is positive, so ``R ⪰ 0``: passive by construction; ``I → ∞`` shorts it (the model
+    without the limit).  Built with the same series connection as a retention branch at an input
+    (``Q̇ = y − G(e) e``, the model seeing ``u − e``).
+
+    Returns
+    -------
+    PHSystem
+        With ``charge`` appended as the last state (start it at 0).
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> from phs import Param
+    >>> I = Param("I_max", 1e-3, "A", "current limit")
+    >>> q = StateInfo("lim.Q", "C", (-1.0, 1.0), "charge across the limiter", "C", 1e-9)
+    >>> knee, C = Param("e_k", 0.01, "V", "knee voltage"), Param("C_l", 1e-7, "F", "capacitance across the limiter")
+    >>> s = limit_input_current(rc_circuit(), "U", I.symbol, knee.symbol, C.symbol, q, [I, knee, C], "limit")
+    >>> s.state_names[-1], s.check().ok
+    ('lim.Q', True)
+    """
+    from components.candidates.electrical import _series_with_input
+
+    j = system.input_names.index(input_name)
+    e = charge.symbol / capacitance
+    conductance = limit / knee * _tanh_over(e / knee)
+    return _series_with_input(system, j, charge, charge.symbol**2 / (2 * capacitance), conductance, params, effect)
+
+
+def _tanh_over(x: sp.Expr) -> sp.Expr:
+    """``tanh(x)/x`` without its removable singularity at 0: ``(x tanh x + ε²)/(x² + ε²)`` (``ε`` = 1e-6),
+    a ratio whose denominator never vanishes, equal to 1 at 0, positive everywhere, and within 1e-12 of
+    ``tanh(x)/x`` for ``|x| ≥ 1e-3``."""
+    eps2 = sp.Float(1e-12)
+    return (sp.tanh(x) * x + eps2) / (x**2 + eps2)

@@ -54,12 +54,14 @@ def test_every_dictionary_term_is_passive_at_its_bounds():
         # nonnegative terms (growing energies, every dissipation) at their largest coefficient; signed
         # energies at a typical one of either sign (the fit keeps them only where H stays bounded below);
         # input gains at both ends of their range
-        thetas = t.bounds() if t.kind == "input" else (-1.0, 1.0) if t.signed else (t.bounds()[1],)
+        gain = t.kind == "input" or t.shape == "drift_gain"
+        thetas = t.bounds() if gain else (-1.0, 1.0) if t.signed else (t.bounds()[1],)
         for theta in thetas:
             aug = Discovered([t]).augment(s, t.state, None)
             values = {t.parameter: theta}
-            if t.kind == "memory":  # the heat state's sensitivity and time constant at their bounds too
-                values.update({p.name: p.range[1] for p in t.params()[1:]})
+            # a heat state's sensitivity and time constant, a mode's frequency and damping, a drift's time
+            # constant at their bounds too
+            values.update({p.name: p.range[1] for p in t.params()[1:]})
             report = aug.system.with_params(values).check(samples=50)
             assert report.ok, (t.label, theta, str(report))
 

@@ -304,6 +304,7 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
         free = list(data.free) + list(aug.free)
         x0 = dict(zip(nominal.system.state_names, map(float, nominal.x0), strict=True))
         x0.update(aug.x0)
+        x0 = {k: v for k, v in x0.items() if k in system.state_names}  # a state of a term refitted without it
         # nominal parameters keep the nominal fit's log scaling; the new ones the candidate's choice
         nominal_log = list(data.log_scale) if data.log_scale else _default_log(system, data.free)
         log_scale = nominal_log + list(aug.log_scale)

@@ -33,6 +33,11 @@ Every term is one shape on one state of the fitted model, scaled by that state's
     the sensor, not a power port.  Outputs that are port outputs or mix states (the source current)
     get none: a correction there could stand in for any missing current.
 
+``mode``, ``drift``, ``limit``
+    Terms that append states (:mod:`~phs.workflows.diagnose.discover.families`): a second mass joined to
+    a body by a spring and a damper, a slow clock state that scales a stiffness, a dissipation or an
+    input's gain, and a limit on the flow through an electrical input.
+
 ``E_s`` (typical co-energy times ``q_s``) and ``R_s`` (typical rate over typical effort) make
 ``theta ~ 1`` an effect of the size of the model's own terms, so every coefficient shares one range.
 
@@ -69,6 +74,7 @@ from components.candidates.base import _add_damping, _rebuild, _unit_of
 from components.candidates.maps import add_heated_dissipation, correct_measured, scale_input
 from phs.params import Param, StateInfo
 from phs.system import PHSystem
+from phs.workflows.diagnose.discover.families import KINDS, added_terms, attach, fit_start, label, log_parameters, parameters, params, scales, states, words
 
 EFFECT = "discovered"
 THETA_MAX = 30.0
@@ -181,6 +187,8 @@ class Term:
 
     @property
     def label(self) -> str:
+        if self.kind in KINDS:
+            return label(self)
         tail = f"@{self.c:+.2f}" if self.shape.startswith("engage") else ""
         return f"{self.state}:{self.shape}" + (f"({self.via})" if self.via else "") + tail
 
@@ -194,6 +202,8 @@ class Term:
     def parameters(self) -> list[str]:
         """Every coefficient the term fits: :attr:`parameter`, and for a heated dissipation its heat
         state's sensitivity and time constant."""
+        if self.kind in KINDS:
+            return parameters(self)
         if self.kind != "memory":
             return [self.parameter]
         slug = _slug(self.state)
@@ -204,8 +214,27 @@ class Term:
         """Name of the heat state a ``memory`` term adds."""
         return f"{EFFECT}.heat_{_slug(self.state)}"
 
+    @property
+    def log_parameters(self) -> list[str]:
+        """The parameters fitted on a log scale (a heated dissipation's sensitivity and time constant, a
+        mode's frequency and damping ratio, a drift's time constant)."""
+        if self.kind in KINDS:
+            return log_parameters(self)
+        return self.parameters[1:] if self.kind == "memory" else []
+
+    @property
+    def new_states(self) -> list[str]:
+        """The states the term appends to the model (each starts at 0)."""
+        if self.kind in KINDS:
+            return states(self)
+        return [self.heat_state] if self.kind == "memory" else []
+
+    def fit_start(self, first_order: float) -> float:
+        """The coefficient a forward step's fit starts at, given the term's first-order coefficient."""
+        return fit_start(self, first_order)
+
     def bounds(self) -> tuple[float, float]:
-        if self.kind == "input":
+        if self.kind == "input" or self.shape == "drift_gain":
             return GAIN_BOUNDS
         return (-THETA_MAX, THETA_MAX) if self.signed else (THETA_MIN, THETA_MAX)
 
@@ -213,6 +242,8 @@ class Term:
         """The term's fitted parameters (:attr:`parameters`) at ``start`` (moved inside their bounds;
         the main coefficient by default at its neutral point: zero, or :data:`THETA_MIN`)."""
         start = start or {}
+        if self.kind in KINDS:
+            return params(self, start)
         lo, hi = self.bounds()
         v = start.get(self.parameter, 0.0 if self.signed else lo)
         out = [Param(self.parameter, float(min(max(v, lo), hi)), "1", f"coefficient of {self.label} (in units of the state's scale)",
@@ -231,6 +262,8 @@ class Term:
         """The fixed scale parameters the term reads (shared by every term on the same state): ``q_s``
         of its state (or of ``via``), and ``E_s`` [J] or ``e_s`` (its effort) and ``R_s`` (an ``R`` entry);
         a heated dissipation also its heat scale ``R_s e_s² tau`` [J], a sensor term the output's level."""
+        if self.kind in KINDS:
+            return scales(self, system)
         if self.kind in ("input", "sensor"):
             v = _slug(self.via)
             out = [Param(f"{EFFECT}.{v}_scale", self.q_s, _unit_of(system, self.via), f"largest |{self.via}| along the fit")]
@@ -282,6 +315,8 @@ class Term:
     def attach(self, system, params: list, scales: dict, new: list) -> PHSystem:
         """``system`` with the term attached: ``params`` its own (:meth:`params`), ``scales`` the scale
         symbols by name, ``new`` the parameters the new system declares."""
+        if self.kind in KINDS:
+            return attach(self, system, params, scales, new)
         p = params[0]
         label = f"{EFFECT}@{self.label}"
         expr = self.expression(system, p.symbol, scales)
@@ -303,6 +338,8 @@ class Term:
         """What the term's shape means, for a coefficient of sign ``sign`` (``values``: the fitted
         coefficients, for the sizes a heated dissipation, an input gain or a sensor term states)."""
         values = values or {}
+        if self.kind in KINDS:
+            return words(self, system, {self.parameter: sign, **values})
         theta = float(values.get(self.parameter, sign))
         if self.kind == "memory":
             sens, tau = (float(values.get(k, 0.0)) for k in self.parameters[1:])
@@ -398,7 +435,7 @@ def dictionary(system, scales, trajectory=None, outputs=None) -> list[Term]:
             continue
         x_s, _, _ = span(x)
         terms.extend(Term("sensor", y, sh, via=x, q_s=x_s, amplitude=scales.get("level", y, 1.0), signed=True) for sh in _READING)
-    return terms
+    return terms + added_terms(system, scales, span, make=Term)
 
 
 def _read_state(system, output: str) -> str | None:
@@ -463,10 +500,9 @@ class Discovered(Candidate):
         # sensitivity and time constant then do not matter
         main = {t.parameter for t in self.terms}
         neutral = {p.name: (0.0 if not p.positive else p.range[0]) for p in params if p.name in main}
-        memory = [t for t in self.terms if t.kind == "memory"]
-        log = [n for t in memory for n in t.parameters[1:]]
+        log = [n for t in self.terms for n in t.log_parameters]
         return Augmentation(EFFECT, where, " + ".join(t.label for t in self.terms), self.apply(system), [p.name for p in params],
-                            {p.name: p.range for p in params}, log, {t.heat_state: 0.0 for t in memory}, neutral=neutral,
+                            {p.name: p.range for p in params}, log, {x: 0.0 for t in self.terms for x in t.new_states}, neutral=neutral,
                             summary=self.summary)
 
     def __repr__(self) -> str:

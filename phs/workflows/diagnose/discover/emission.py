@@ -13,12 +13,16 @@ from __future__ import annotations
 import re
 
 from phs.io import write_atomic
+from phs.workflows.diagnose.discover.families import CLOCK_SMOOTH, KINDS, KNEE, LIMIT_FAST, attach, state_infos
 from phs.workflows.diagnose.discover.dictionary import EFFECT, C, Discovered, _slug, shape
 
 _FUNCTIONS = ("cosh", "exp", "log", "sqrt")
 _WHAT = {"energy": "an added energy", "damping": "an added dissipation R >= 0",
          "memory": "a dissipation R >= 0 with its own heat state (fed by the power it dissipates)",
-         "input": "a state-dependent input gain (a modulated transformer)", "sensor": "a correction of a measured output"}
+         "input": "a state-dependent input gain (a modulated transformer)", "sensor": "a correction of a measured output",
+         "mode": "a second mass joined by a spring and a damper (two new states)",
+         "drift": "a parameter scaled by a slow clock state of its own",
+         "limit": "a limit on the flow through an input (a nonlinear resistance in series with it)"}
 
 
 def _class_name(system_name: str) -> str:
@@ -67,6 +71,9 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         sym = {key: repr(f"{EFFECT}.{_slug(t.state)}_{key}") for key in ("scale", "energy", "effort", "damping", "heat", "level")}
         sym["via"] = repr(f"{EFFECT}.{_slug(t.via)}_scale")
         body.append(f"        # {t.label}: {_WHAT[t.kind]}")
+        if t.kind in KINDS:
+            body.extend(_added(t, base, own, th, new, k))
+            continue
         if t.via:
             body.append(f"        x = state({t.via!r}) / S[{sym['via']}]")
         if t.kind == "energy":
@@ -91,11 +98,13 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
     used = [f for f in _FUNCTIONS if re.search(rf"\b{f}\(", text)]
     main = {t.parameter for t in terms}
     neutral = {p.name: (0.0 if not p.positive else p.range[0]) for p in thetas if p.name in main}
-    memory = [t for t in terms if t.kind == "memory"]
-    log = [n for t in memory for n in t.parameters[1:]]
-    x0 = {t.heat_state: 0.0 for t in memory}
-    blocks = [b for b, kind in (("add_heated_dissipation", "memory"), ("correct_measured", "sensor"), ("scale_input", "input"))
-              if any(t.kind == kind for t in terms)]
+    log = [n for t in terms for n in t.log_parameters]
+    x0 = {x: 0.0 for t in terms for x in t.new_states}
+    memory = [t for t in terms if t.new_states]
+    kinds = {t.kind for t in terms} | {"input" for t in terms if t.shape == "drift_gain"}
+    blocks = [b for b, kind in (("add_clock", "drift"), ("add_heated_dissipation", "memory"), ("add_mode", "mode"),
+                                ("correct_measured", "sensor"), ("limit_input_current", "limit"), ("scale_input", "input"))
+              if kind in kinds]
     lines = [
         f'"""{name}: a correction of {base.name!r} discovered by diagnosis.',
         "",
@@ -152,6 +161,37 @@ def source(discovery, description: str = "", share: float | None = None) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _state(info) -> str:
+    return (f"StateInfo({info.name!r}, {info.unit!r}, ({float(info.range[0])!r}, {float(info.range[1])!r}), {info.description!r}, "
+            f"{info.kind!r}, {float(info.scale)!r}, self.effect)")
+
+
+def _added(t, base, own: list, th: str, new: str, k: int) -> list[str]:
+    """Source lines attaching a term that appends states (:mod:`~phs.workflows.diagnose.discover.families`),
+    as :func:`~phs.workflows.diagnose.discover.attach` does."""
+    slug, b = _slug(t.state), t.parameter.split(".theta_", 1)[1]
+    infos = state_infos(t, base)
+    label = f"{EFFECT}@{t.label}"
+    if t.kind == "mode":
+        return [f"        added = [{_state(infos[0])},", f"                 {_state(infos[1])}]",
+                f"        s = add_mode(s, {t.state!r}, {th}, {own[1]}.symbol, {own[2]}.symbol, S[{f'{EFFECT}.{slug}_mass'!r}], *added, {new}, "
+                f"self.effect, {label!r})"]
+    if t.kind == "limit":
+        flow, knee, step = (f"S[{f'{EFFECT}.{slug}_{key}'!r}]" for key in ("flow", "knee", "step"))
+        return [f"        limit = {flow} / {th}",
+                f"        s = limit_input_current(s, {t.state!r}, limit, {knee}, {LIMIT_FAST * KNEE!r} * {step} * limit / {knee}, "
+                f"{_state(infos[0])}, {new}, self.effect)"]
+    lines = [f"        clock = {_state(infos[0])}",
+             f"        s = add_clock(s, clock, {own[1]}.symbol, S[{f'{EFFECT}.{b}_clock_energy'!r}], {new}, self.effect, {label + ':clock'!r})"]
+    if t.shape == "drift_stiffness":
+        return lines + [f"        z = state({t.state!r}) / S[{f'{EFFECT}.{slug}_scale'!r}]",
+                        f"        s = add_energy(s, {label!r}, {th} * clock.symbol * S[{f'{EFFECT}.{slug}_energy'!r}] * z**2 / 2, [], self.effect)"]
+    if t.shape == "drift_damping":
+        return lines + [f"        term = {th} * S[{f'{EFFECT}.{slug}_damping'!r}] * sqrt(clock.symbol**2 + {CLOCK_SMOOTH!r})",
+                        f"        s = add_damping(s, {t.state!r}, term, [], {f'{EFFECT}.{k}'!r})"]
+    return lines + [f"        s = scale_input(s, {t.state!r}, 1 + {th} * clock.symbol, [], self.effect)"]
 
 
 def _wrap(text: str, width: int = 100) -> list[str]:

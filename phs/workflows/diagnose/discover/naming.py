@@ -130,7 +130,8 @@ def resemblance(discovered, base, nominal, hypotheses, data) -> list[tuple[str, 
 
 def describe(terms, values: dict, system) -> list[dict]:
     """Per term: ``term``, ``state`` (the state it acts on, or for an input gain or a sensor term the
-    state it depends on), ``nature`` (``conservative``, ``dissipative``, ``input map``, ``sensor``),
+    state it depends on), ``nature`` (``conservative``, ``dissipative``, ``input map``, ``sensor``, ``mode``,
+    ``drift``, ``port limit``),
     ``parameter``, ``coefficient`` and ``words``; ``input`` or ``sensor`` (the input or measured output)
     for those terms, ``memory`` (the heat state's name, ``sensitivity``, ``tau``) for a heated dissipation.
 
@@ -165,6 +166,9 @@ _NATURE = {
     "memory": ("dissipative", "an added dissipation R ≥ 0 on {0} with its own heat storage, fed by the power it dissipates"),
     "input": ("input map", "a state-dependent gain of input {0}, a modulated transformer at the port"),
     "sensor": ("sensor", "a correction of the measured output {0}, not of a power port"),
+    "mode": ("mode", "an added storage pair (a mass and a spring, with a damper) joined to {0}"),
+    "drift": ("drift", "a slow state of its own scaling a parameter of {0}"),
+    "limit": ("port limit", "a nonlinear resistance in series with input {0}"),
 }
 """Per term kind: its nature and what it adds (``{0}``: where)."""
 

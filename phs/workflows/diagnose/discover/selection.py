@@ -126,6 +126,32 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     """
     from phs.errors import PHSError
 
+    out = []
+    for group in _groups(terms):
+        try:
+            out += _screen_group(current, chosen, group, data, base_system)
+        except (PHSError, RuntimeError, ValueError, np.linalg.LinAlgError):
+            continue  # a group whose model cannot be integrated at all is left out, not the others
+    out.sort(key=lambda tg: -tg[1])
+    return out
+
+
+def _groups(terms) -> list[list]:
+    """``terms`` split into the groups screened in one model each: the terms on the model's own states
+    together, and each kind of term that appends states (:data:`~phs.workflows.diagnose.discover.families.KINDS`)
+    on its own.  All of them in one model would integrate every appended state at once (on the
+    electrostatic actuator's 47 terms, 53 s against 6 s for the groups: the cost grows with states
+    times parameters)."""
+    from phs.workflows.diagnose.discover.families import KINDS
+
+    own = [t for t in terms if t.kind not in KINDS]
+    return [g for g in [own, *([t for t in terms if t.kind == k] for k in KINDS)] if g]
+
+
+def _screen_group(current, chosen, terms, data, base_system) -> list[tuple]:
+    """:func:`screen` of one group of terms (:func:`_groups`), unsorted."""
+    from phs.errors import PHSError
+
     start = _start(current, chosen)
     cand = Discovered(list(chosen) + list(terms), start)
     system = cand.apply(base_system)
@@ -140,6 +166,12 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
     out = []
     rr = float(r @ r) or 1.0
     for t, j in zip(terms, cols, strict=True):
+        if t.kind in UNRANKED:  # kept whatever its first-order column says (:data:`UNRANKED`)
+            ok = j is not None and np.all(np.isfinite(j))
+            jp = (j - Qa @ (Qa.T @ j) if A.shape[1] else j) if ok else None
+            jj = float(jp @ jp) if ok else 0.0
+            out.append((t, float(jp @ r) ** 2 / jj / rr if jj > 0 else 0.0, float(jp @ r) / jj if jj > 0 else 0.0))
+            continue
         if j is None or not np.all(np.isfinite(j)):
             continue
         jp = j - Qa @ (Qa.T @ j) if A.shape[1] else j
@@ -150,7 +182,6 @@ def screen(current, chosen, terms, data, base_system) -> list[tuple[Term, float,
         if not t.signed and coef <= 0:
             continue
         out.append((t, float(jp @ r) ** 2 / jj / rr, coef))
-    out.sort(key=lambda tg: -tg[1])
     return out
 
 
@@ -213,15 +244,40 @@ def _nudged_columns(system, data, x0, p0: dict, values: dict, params: list):
     return r, A, terms
 
 
+UNRANKED = ("memory", "limit")
+"""Term kinds the first-order screen cannot rank: a heated dissipation's heat acts at second order in its
+coefficient (its first-order share is that of a constant dissipation), and a limit acts only where the flow
+reaches it.  The best of each kind is fitted at every forward step."""
+
+
 def _fitted(ranked, top: int) -> list:
-    """The screened terms fitted at a forward step: the ``top`` best, and the best heated dissipation when
-    it is not among them (its first-order share is that of a constant dissipation: its heat acts at
-    second order in its coefficient, so the screen cannot rank it)."""
+    """The screened terms fitted at a forward step: the ``top`` best, and the best of each kind of
+    :data:`UNRANKED` when none of that kind is among them."""
     out = list(ranked[:top])
-    memory = [r for r in ranked[top:] if r[0].kind == "memory"]
-    if memory and not any(r[0].kind == "memory" for r in out):
-        out.append(memory[0])
+    for kind in UNRANKED:
+        rest = [r for r in ranked[top:] if r[0].kind == kind]
+        if rest and not any(r[0].kind == kind for r in out):
+            out.append(rest[0])
     return out
+
+
+def _tuned(row, current, chosen, data, base_system) -> tuple:
+    """A screened ``(term, share, coefficient)`` row; a mode's moved to the frequency its screen prefers
+    (:func:`~phs.workflows.diagnose.discover.families.refine_mode`)."""
+    from phs.workflows.diagnose.discover.families import refine_mode
+
+    t = row[0]
+    if t.kind != "mode":
+        return row
+    rows = {}
+
+    def share(cand):
+        found = screen(current, chosen, [cand], data, base_system)
+        rows[cand] = found[0] if found else (cand, 0.0, 0.0)
+        return rows[cand][1]
+
+    best, g = refine_mode(t, share)
+    return rows[best] if best in rows and g > row[1] else row
 
 
 def _start(current, chosen) -> dict:
@@ -342,8 +398,10 @@ def select(base, data, *, n_jobs: int = 1, progress: bool = False, max_terms: in
         start = _start(current, chosen)
         # each fit starts from the chosen terms' values and the new term's first-order coefficient (a
         # coefficient starting at exactly zero gives the solver no scale to move it by)
-        augs = [Discovered(chosen + [t], {**start, t.parameter: float(np.clip(c, -1.0, 1.0))}).augment(
-            base.system, (chosen or [t])[0].state, None) for t, _, c in _fitted(ranked, top)]
+        fitted = [_tuned(row, current, chosen, data, base.system) for row in _fitted(ranked, top)]
+        terms += [t for t, _, _ in fitted if t not in terms]
+        augs = [Discovered(chosen + [t], {**start, t.parameter: t.fit_start(c)}).augment(
+            base.system, (chosen or [t])[0].state, None) for t, _, c in fitted]
         hyps = _run_all(current, augs, data, n_jobs, progress, f"discover step {step + 1}", joint=False)
         ok = sorted([h for h in hyps if h.ok and not h.no_improvement], key=lambda h: h.bic)
         taken = None
