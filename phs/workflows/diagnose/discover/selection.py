@@ -166,7 +166,7 @@ def _screen_group(current, chosen, terms, data, base_system) -> list[tuple]:
     out = []
     rr = float(r @ r) or 1.0
     for t, j in zip(terms, cols, strict=True):
-        if t.kind in UNRANKED:  # kept whatever its first-order column says (:data:`UNRANKED`)
+        if t.kind == "limit":  # kept whatever its first-order column says: it acts only where the flow reaches it
             ok = j is not None and np.all(np.isfinite(j))
             jp = (j - Qa @ (Qa.T @ j) if A.shape[1] else j) if ok else None
             jj = float(jp @ jp) if ok else 0.0
