@@ -74,7 +74,7 @@ from components.candidates.base import _add_damping, _rebuild, _unit_of
 from components.candidates.maps import add_heated_dissipation, correct_measured, scale_input
 from phs.params import Param, StateInfo
 from phs.system import PHSystem
-from phs.workflows.diagnose.discover.families import KINDS, added_terms, attach, fit_start, label, log_parameters, parameters, params, scales, states, words
+from phs.workflows.diagnose.discover.families import KINDS, _slug, added_terms, attach, fit_start, label, log_parameters, parameters, params, scales, states, words
 
 EFFECT = "discovered"
 THETA_MAX = 30.0
@@ -87,10 +87,6 @@ WIDTH = 0.05
 ENGAGE_AT = (0.3, 0.45, 0.6, 0.75)
 """Where one-sided springs engage, as shares of the largest deflection reached on each side.
 Not chosen on a measurement."""
-
-
-def _slug(name: str) -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in name)
 
 
 Z, C, E, X = sp.symbols("z c e x", real=True)
