@@ -12,7 +12,8 @@ Cases:
   With ``--alone``: the discovery step alone on the nominal fit (no library), as in the first table of
   ``docs/workflows/discover.md`` (``--seconds 3``).
 * ``outside``: each truth of ``examples/concealed_outside.py`` (a second mechanical mode from a flexible
-  appendage, a suspension stiffness drifting as it warms, a current limit of the drive), simulated from
+  appendage, a suspension stiffness drifting as it warms, a current limit of the drive, a light appendage tuned
+  near the resonance whose two modes beat, on the ``ringing`` program), simulated from
   hand-written equations with scipy rather than by the framework; 20 s recordings, run and reported as the
   novel cases (``recovered``, verdict, terms).
 * ``library``: in-library cases of ``examples/concealed_effects.py`` with ``discover=None``: the verdict
