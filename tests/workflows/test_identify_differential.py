@@ -32,8 +32,14 @@ FREE = {"rc": ["R.R", "C.C"], "rlc": ["R.R", "L.L", "C.C"], "msd": ["k.K", "b.b"
 OUTPUTS = {"rc": ["v_C"], "rlc": ["C.Q", "U.i"], "msd": ["position"], "msd2": ["position", "F.v"],
            "duffing2": ["position"]}
 RTOL = 1e-9
-"""The fit's integration tolerance here: the central differences divide its error by their step (1e-5 of a column;
-the truths of the screening cases are integrated to 1e-10 regardless)."""
+"""The fit's integration tolerance here (the truths of the screening cases are integrated to 1e-10 regardless)."""
+FD_RTOL = 1e-11
+"""The central differences' integration tolerance (and their absolute tolerance a hundredth of the fit's): they
+divide the integration's error by their step, so at the fit's own :data:`RTOL` a column the recording hardly sees
+carries that error times 1e4.  Measured on a generated RC fit (50 PRBS samples, the resistance's column 0.09 of the
+capacitance's): the exact Jacobian at rtol 1e-9 against differences at 1e-9 disagreed by 0.038 in that column (0.055
+at a step of 1e-5, 4.6e-3 at 1e-3: the differences' noise, falling with their step); against differences at 1e-11,
+by 5.6e-5."""
 FD_STEP = 1e-4
 """Central-difference step in the fit coordinates: of the parameters (ratios to their start or their logarithms), and
 of the start states' excursion in the recording: truncation ~ FD_STEP² ~ 1e-8 of the curvature, integration noise
@@ -42,8 +48,8 @@ AGREE = 1e-2
 """Agreement asked of each column of the Jacobian with its central differences, relative to the larger of the column's
 norm and 1e-3 of the Jacobian's largest column (a direction the recording hardly sees is compared on the scale of
 those it sees).  The two are independent computations of one derivative; measured on 300 generated fits: up to
-4.3e-3 at rtol 1e-9, 2e-3 at rtol 1e-10 where the integration's own error over the step dominates the differences (it falls to 6e-5 at
-rtol 1e-12 and a step of 1e-5, i.e. it is the differences' error).  A seed of the wrong size, a lost chain-rule term, a segment
+4.3e-3 with the differences at rtol 1e-9 where the integration's own error over the step dominates them (it falls to 6e-5
+at rtol 1e-12 and a step of 1e-5, i.e. it is the differences' error; hence :data:`FD_RTOL`).  A seed of the wrong size, a lost chain-rule term, a segment
 restarted from the wrong state or a window's start state seeded into the wrong columns are off by O(1)."""
 
 
@@ -109,9 +115,11 @@ def check_jacobian(case: LabCase, free, log_scaled, estimate, shooting, offsets)
         reject()
     r, J = prob.jac(z)
     assert np.array_equal(r, r0)
+    ref = ident._Problem(s, rec, free, log_scaled, OUTPUTS[case.model], weights, x0, estimate, FD_RTOL,
+                         _atol(case, truth) * 1e-2, shooting=shooting, params=p_true)
     # steps of FD_STEP in the parameters' coordinates, and of FD_STEP of their excursion in the states'
     steps = FD_STEP * np.concatenate([np.ones(prob.n_theta), excursion[prob.ixi]] + [excursion] * (prob.K - 1))
-    Jfd = np.column_stack([(prob.res(z + h * e) - prob.res(z - h * e)) / (2 * h) for h, e in zip(steps, np.eye(len(z)))])
+    Jfd = np.column_stack([(ref.res(z + h * e) - ref.res(z - h * e)) / (2 * h) for h, e in zip(steps, np.eye(len(z)))])
     norms = np.linalg.norm(Jfd, axis=0)
     err = np.linalg.norm(J - Jfd, axis=0) / np.maximum(norms, 1e-3 * norms.max(initial=0.0) + 1e-300)
     assert np.all(err <= AGREE), (err, [sg.layout.size for sg in prob.segments])
