@@ -11,7 +11,9 @@ functions of state and input.
 
 from __future__ import annotations
 
+import contextvars
 import hashlib
+from contextlib import contextmanager
 from dataclasses import replace
 from functools import cached_property
 from numbers import Real
@@ -29,10 +31,40 @@ from phs.params import EnergyTerm, InputInfo, Measured, Param, StateInfo, check_
 from phs.structure_units import construction_problems
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Iterator
     from typing import Any
 
     from phs.checks import CheckReport
+
+_ASSEMBLING = contextvars.ContextVar("phs_assembling", default=False)
+
+
+@contextmanager
+def assembling() -> Iterator[None]:
+    """Within it, a :class:`PHSystem` is built without its structure checks (J and N skew, the dissipation
+    sampled for ``R ⪰ 0``, the units of the structure; its symbols are still checked) and without the
+    validity conditions its expressions imply (square roots, logarithms): for a model put
+    together one part at a time, whose parts are not models anyone runs.  The model assembled must be
+    built again outside (``PHSystem(...)`` or a rebuild), where it is checked whole, once.
+
+    Examples
+    --------
+    >>> import sympy as sp
+    >>> q = sp.Symbol("q", real=True)
+    >>> with assembling():
+    ...     part = PHSystem("p", ["q"], q**2 / 2, [[0]], [[-1]])   # R < 0: not checked while assembling
+    >>> try:
+    ...     PHSystem("p", ["q"], part.H, part.J, part.R)
+    ... except ModelError as e:
+    ...     print(str(e).splitlines()[1].split(":")[0])
+      - R is not positive semidefinite
+    """
+    token = _ASSEMBLING.set(True)
+    try:
+        yield
+    finally:
+        _ASSEMBLING.reset(token)
+
 
 _NUMERIC_MODULES = [{"erf": __import__("scipy.special", fromlist=["erf"]).erf}, "numpy"]
 
@@ -156,7 +188,7 @@ class PHSystem:
                 problems.append(f"{p!r} is not a Param")
             elif p.value is None:
                 problems.append(f"parameter {p.name!r} has no value")
-        auto = _domain_conditions(
+        auto = [] if _ASSEMBLING.get() else _domain_conditions(
             [t.expr for t in self.energy_terms] + [v for M in (self.J, self.R, self.G) for _, _, v in nonzero_entries(M)]
             + [mo.expr for mo in self.measured],
             name,
@@ -164,7 +196,7 @@ class PHSystem:
         self.conditions = tuple(conditions) + tuple(c for c in auto if c.expr not in {k.expr for k in conditions})
         self._sampled_structure = FrozenDict()
         self._check_symbols(problems)
-        if not problems:
+        if not problems and not _ASSEMBLING.get():
             self._check_structure(problems)
         if problems:
             raise ModelError(f"invalid port-Hamiltonian system {name!r}", problems)

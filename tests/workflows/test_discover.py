@@ -43,11 +43,16 @@ def softening():
 
 
 def test_every_dictionary_term_is_passive_at_its_bounds():
+    import dataclasses
+
     from components.candidates import Scales
 
     s = electrostatic_actuator()
-    terms = dictionary(s, Scales.of(s), outputs=["position", "current"])
-    assert {t.kind for t in terms} == {"energy", "damping", "memory", "input", "sensor"} and len(terms) > 15
+    terms = dictionary(s, dataclasses.replace(Scales.of(s), duration=20.0), outputs=["position", "current"])
+    from phs.workflows.diagnose.discover.families import DEFAULT_KINDS
+
+    assert {t.kind for t in terms} == {"energy", "damping", "memory", "input", "sensor", *DEFAULT_KINDS} and len(terms) > 15
+    assert {"mode", "drift"} <= set(DEFAULT_KINDS)
     # sensor terms only on an output that reads one state (the position), never on the source current
     assert {t.state for t in terms if t.kind == "sensor"} == {"position"}
     for t in terms:

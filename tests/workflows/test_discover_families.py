@@ -4,6 +4,7 @@ reproduced by the source it emits."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import math
 from types import SimpleNamespace as NS
@@ -16,7 +17,8 @@ from codegen import Simulator
 from components.candidates import Scales
 from phs.workflows.diagnose.discover.dictionary import Discovered, Term, dictionary
 from phs.workflows.diagnose.discover.emission import source
-from phs.workflows.diagnose.discover.families import DEFAULT_KINDS, KINDS, added_terms as _added, refine_mode, retuned
+from phs.workflows.diagnose.discover.families import DEFAULT_KINDS, DRIFT_SLOWER, DRIFT_TAU, KINDS, refine_mode, retuned, slowest_decay
+from phs.workflows.diagnose.discover.families import added_terms as _added
 from systems.examples import mass_spring_damper, rc_circuit
 
 T = np.linspace(0.0, 4.0, 2001)
@@ -32,8 +34,15 @@ def _force(t):
     return 2.0 * (np.tanh(20 * (np.sin(2 * np.pi * 0.7 * t) - 0.2)) + 1.0)
 
 
+def _scales(system):
+    """The system's typical magnitudes on a recording of 60 s, long enough for a drift slower than ten times
+    the slowest decay of the models here (5 s for the mass-spring-damper)."""
+    return dataclasses.replace(Scales.of(system), duration=60.0)
+
+
 def _term(system, kind, span=None, **match):
-    return next(t for t in added_terms(system, Scales.of(system), span) if t.kind == kind and all(getattr(t, k) == v for k, v in match.items()))
+    return next(t for t in added_terms(system, _scales(system), span)
+                if t.kind == kind and all(getattr(t, k) == v for k, v in match.items()))
 
 
 def _run(system, values, u, x0=None):
@@ -43,13 +52,13 @@ def _run(system, values, u, x0=None):
 
 def test_every_family_is_in_the_dictionary_and_passive():
     s = mass_spring_damper()
-    terms = dictionary(s, Scales.of(s))
+    terms = dictionary(s, _scales(s))
     assert not {t.kind for t in terms} & set(KINDS) - set(DEFAULT_KINDS)  # only the default families join the dictionary
-    assert not any(t.kind == "limit" for t in added_terms(s, Scales.of(s)))  # a force input is not an electrical port
+    assert not any(t.kind == "limit" for t in added_terms(s, _scales(s)))  # a force input is not an electrical port
     rc = rc_circuit()
-    assert [t.label for t in added_terms(rc, Scales.of(rc)) if t.kind == "limit"] == ["U:current_limit"]
+    assert [t.label for t in added_terms(rc, _scales(rc)) if t.kind == "limit"] == ["U:current_limit"]
     for sysm in (s, rc):
-        for t in added_terms(sysm, Scales.of(sysm)):
+        for t in added_terms(sysm, _scales(sysm)):
             # at a typical size, not only at the neutral point: the checks must hold where fits go
             start = {t.parameter: 0.5}
             aug = Discovered([t], start).augment(sysm, t.state, None)
@@ -83,6 +92,25 @@ def test_a_mode_moves_the_body_as_a_second_mass_on_a_spring_does():
     assert np.max(np.abs(plain["position"] - ref.y[0])) >= 1e-2 * np.ptp(ref.y[0])
 
 
+def test_a_drift_is_never_faster_than_the_models_own_decay():
+    """A drift is slower than ``DRIFT_SLOWER`` times the fitted model's slowest decay, whose transient it
+    would otherwise stand for; a recording shorter than that gets no drift."""
+    s = mass_spring_damper()  # m = 1, b = 0.4: poles -0.2 ± 1.99j, a decay in 1/0.2 = 5 s
+    assert slowest_decay(s) == pytest.approx(5.0, rel=1e-9)
+    rc = rc_circuit()  # one pole, -1/(RC)
+    R, C = (rc.param_values()[n] for n in ("R.R", "C.C"))
+    assert slowest_decay(rc) == pytest.approx(R * C, rel=1e-9)
+    for length, present in ((0.9 * DRIFT_SLOWER * 5.0, False), (1.1 * DRIFT_SLOWER * 5.0, True), (30 * DRIFT_SLOWER * 5.0, True)):
+        sc = dataclasses.replace(Scales.of(s), duration=length)
+        drifts = [t for t in added_terms(s, sc) if t.kind == "drift"]
+        assert bool(drifts) == present, length
+        for t in drifts:  # the time constant's range starts at the floor, or at DRIFT_TAU's share of a long recording
+            lo, hi = t.params({})[1].range
+            assert lo == pytest.approx(max(DRIFT_SLOWER * 5.0, DRIFT_TAU[0] * length)) and hi == pytest.approx(DRIFT_TAU[1] * length)
+            assert lo <= t.params({})[1].value <= hi
+
+
+@pytest.mark.filterwarnings("ignore::phs.errors.ParameterRangeWarning")  # τ = 1.5 s: the physics, below a fit's floor
 def test_a_drifting_stiffness_is_a_spring_whose_constant_relaxes_to_its_drifted_value():
     s = mass_spring_damper()
     # scaled as along a fit: the largest |x| reached (0.73 m here) is about the scale q_s = 1 m
@@ -145,7 +173,7 @@ def test_refine_mode_finds_the_peak_of_a_share_between_grid_points():
                                          ("limit", rc_circuit)])
 def test_the_emitted_source_builds_the_same_model(kind, system, tmp_path):
     s = system()
-    for t in [x for x in added_terms(s, Scales.of(s)) if x.kind == kind][:3]:
+    for t in [x for x in added_terms(s, _scales(s)) if x.kind == kind][:3]:
         values = {n: p.value for n, p in zip(t.parameters, t.params({t.parameter: 0.3}), strict=True)}
         d = NS(scored=NS(values=values), base=NS(system=s), terms=(t,), values=values)
         path = tmp_path / f"emitted_{kind}_{t.parameter.split('.')[-1]}.py"
@@ -165,7 +193,7 @@ def test_the_emitted_source_builds_the_same_model(kind, system, tmp_path):
 
 def test_families_are_named_in_words():
     s = mass_spring_damper()
-    for t in added_terms(s, Scales.of(s)):
+    for t in added_terms(s, _scales(s)):
         assert t.kind in KINDS
         words = t.words(s, 1.0, {n: 0.2 for n in t.parameters})
         assert words and "{" not in words

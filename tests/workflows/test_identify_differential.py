@@ -49,8 +49,8 @@ AGREE = 1e-2
 norm and 1e-3 of the Jacobian's largest column (a direction the recording hardly sees is compared on the scale of
 those it sees).  The two are independent computations of one derivative; measured on 300 generated fits: up to
 4.3e-3 with the differences at rtol 1e-9 where the integration's own error over the step dominates them (it falls to 6e-5
-at rtol 1e-12 and a step of 1e-5, i.e. it is the differences' error; hence :data:`FD_RTOL`).  A seed of the wrong size, a lost chain-rule term, a segment
-restarted from the wrong state or a window's start state seeded into the wrong columns are off by O(1)."""
+at rtol 1e-12 and a step of 1e-5, i.e. it is the differences' error; hence :data:`FD_RTOL`).  A seed of the wrong size,
+a lost chain-rule term, a segment restarted from the wrong state or a window's start state seeded into the wrong columns are off by O(1)."""
 
 
 def _truth(case: LabCase):

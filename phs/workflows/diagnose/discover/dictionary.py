@@ -52,7 +52,7 @@ Examples
 >>> s = mass_spring_damper()
 >>> terms = dictionary(s, Scales.of(s), outputs=["position"])
 >>> sorted({t.kind for t in terms}), terms[0].label
-(['damping', 'energy', 'input', 'memory', 'sensor'], 'k.l:quartic')
+(['damping', 'energy', 'input', 'memory', 'mode', 'sensor'], 'k.l:quartic')
 """
 
 from __future__ import annotations
@@ -73,8 +73,21 @@ from components.candidates import (
 from components.candidates.base import _add_damping, _rebuild, _unit_of
 from components.candidates.maps import add_heated_dissipation, correct_measured, scale_input
 from phs.params import Param, StateInfo
-from phs.system import PHSystem
-from phs.workflows.diagnose.discover.families import KINDS, _slug, added_terms, attach, fit_start, label, log_parameters, parameters, params, scales, states, words
+from phs.system import PHSystem, assembling
+from phs.workflows.diagnose.discover.families import (
+    KINDS,
+    _slug,
+    added_terms,
+    attach,
+    fit_start,
+    label,
+    log_parameters,
+    parameters,
+    params,
+    scales,
+    states,
+    words,
+)
 
 EFFECT = "discovered"
 THETA_MAX = 30.0
@@ -163,12 +176,13 @@ def shape(term) -> sp.Expr:
 @dataclass(frozen=True)
 class Term:
     """One dictionary term: ``kind`` (``energy``, ``damping``, ``memory``: a dissipation with its own heat
-    state, ``input``: a state-dependent input gain, ``sensor``: a correction of a measured output), the
-    ``state`` it acts on (for ``input`` the input's name, for ``sensor`` the measured output's), the
-    ``shape``, the state ``via`` that modulates it (or ""), the engaging point ``c`` (in ``z``), the
-    scales (``q_s`` of ``state`` or of ``via``, ``v_s`` of ``via`` or of the effort, ``amplitude``:
-    ``E_s``, ``R_s`` or the output's level ``y_s``), the heat state's starting time constant ``tau`` and
-    whether its coefficient is ``signed``."""
+    state, ``input``: a state-dependent input gain, ``sensor``: a correction of a measured output, and the
+    families ``mode``, ``drift``, ``limit``), the ``state`` it acts on (for ``input`` the input's name, for
+    ``sensor`` the measured output's), the ``shape``, the state ``via`` that modulates it (or ""), the
+    engaging point ``c`` (in ``z``; a mode's dictionary frequency [Hz], a drift's shortest time constant
+    [s]), the scales (``q_s`` of ``state`` or of ``via``, ``v_s`` of ``via`` or of the effort,
+    ``amplitude``: ``E_s``, ``R_s`` or the output's level ``y_s``), the heat state's starting time constant
+    ``tau`` and whether its coefficient is ``signed``."""
 
     kind: str
     state: str
@@ -431,7 +445,7 @@ def dictionary(system, scales, trajectory=None, outputs=None) -> list[Term]:
             continue
         x_s, _, _ = span(x)
         terms.extend(Term("sensor", y, sh, via=x, q_s=x_s, amplitude=scales.get("level", y, 1.0), signed=True) for sh in _READING)
-    return terms + added_terms(system, scales, span, make=Term)
+    return terms + added_terms(system, scales, span, make=Term, trajectory=traj)
 
 
 def _read_state(system, output: str) -> str | None:
@@ -478,17 +492,19 @@ class Discovered(Candidate):
 
     def apply(self, system: PHSystem) -> PHSystem:
         """``system`` with every term attached (coefficients at their start values, scales fixed; heat
-        states appended in the order of the terms)."""
+        states appended in the order of the terms), its structure checked once, whole (the models in
+        between are not: :func:`~phs.system.assembling`)."""
         scale = {}
         for t in self.terms:
             for p in t.scales(system):
                 scale.setdefault(p.name, p)
         sym = {k: p.symbol for k, p in scale.items()}
-        s = _rebuild(system, params=list(scale.values()))
-        for t in self.terms:
-            own = t.params(self.start)
-            s = t.attach(s, own, sym, own)
-        return s
+        with assembling():
+            s = _rebuild(system, params=list(scale.values()))
+            for t in self.terms:
+                own = t.params(self.start)
+                s = t.attach(s, own, sym, own)
+        return _rebuild(s)
 
     def augment(self, system, where, scales) -> Augmentation:
         params = self.params()

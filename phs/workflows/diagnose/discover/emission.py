@@ -13,8 +13,8 @@ from __future__ import annotations
 import re
 
 from phs.io import write_atomic
-from phs.workflows.diagnose.discover.families import CLOCK_SMOOTH, KINDS, KNEE, LIMIT_FAST, attach, state_infos
 from phs.workflows.diagnose.discover.dictionary import EFFECT, C, Discovered, _slug, shape
+from phs.workflows.diagnose.discover.families import CLOCK_SMOOTH, KINDS, KNEE, LIMIT_FAST, state_infos
 
 _FUNCTIONS = ("cosh", "exp", "log", "sqrt")
 _WHAT = {"energy": "an added energy", "damping": "an added dissipation R >= 0",
