@@ -234,8 +234,10 @@ def _series_resistor_at_input(system, j: int, Ra: sp.Expr, params, effect):
     D = system.S + system.N
     E = sp.zeros(m, m)
     E[j, j] = 1
-    M = (sp.eye(m) + Ra * E * D).inv()
-    M = M.applyfunc(sp.simplify)
+    # without a feedthrough at the input (E D = 0) M is the identity and every new entry a polynomial in
+    # R_a: nothing to simplify (a 20-state curling HASEL spent 101 s simplifying its entries one by one)
+    plain = (E * D).is_zero_matrix
+    M = sp.eye(m) if plain else (sp.eye(m) + Ra * E * D).inv().applyfunc(sp.simplify)
     A2 = A - Ra * B * M * E * C
     B2 = B * M
     C2 = C - Ra * D * M * E * C
@@ -246,7 +248,11 @@ def _series_resistor_at_input(system, j: int, Ra: sp.Expr, params, effect):
     P = (C2.T - B2) / 2
     S = (D2 + D2.T) / 2
     N = (D2 - D2.T) / 2
-    simp = lambda X: X.applyfunc(sp.simplify)  # noqa: E731
+    def simp(X, old=None):  # the entries R_a changed, simplified where M divides them
+        if plain:
+            return X
+        return sp.Matrix(X.rows, X.cols, lambda i, k: X[i, k] if old is not None and X[i, k] == old[i, k] else sp.cancel(X[i, k]))
+
     z = _zsyms(n + m)
     grad, u = sp.Matrix(z[:n]), sp.Matrix(z[n:])
     u_old = M * (u - Ra * E * C * grad)
@@ -254,6 +260,7 @@ def _series_resistor_at_input(system, j: int, Ra: sp.Expr, params, effect):
     diss = [(lab, _entries(_power(ent, z).xreplace(sub), z)) for lab, ent in system.dissipators]
     y = C * grad + D * u_old
     diss.append((f"{effect}@{system.input_names[j]}", _entries(Ra * y[j] ** 2, z)))
-    return _rebuild(system, J=simp(J), R=simp(R), G=simp(G), P=simp(P), S=simp(S), N=simp(N), params=params,
+    return _rebuild(system, J=simp(J, system.J), R=simp(R, system.R), G=simp(G, system.G), P=simp(P, system.P), S=simp(S, system.S),
+                    N=simp(N, system.N), params=params,
                     dissipators=diss, effect=effect)
 

@@ -215,3 +215,39 @@ def test_input_elements_transform_as_documented():
     r = SlewRateLimit().transform(t, u, [100.0])
     assert np.max(np.abs(np.diff(r))) <= 100.0 * 1e-3 * (1 + 1e-12)
     assert r[-1] == 10.0
+
+
+@pytest.mark.parametrize("make", ["curling_hasel2", "msd_hasel"])
+def test_series_resistance_is_the_source_seen_through_the_resistor(make):
+    """The series resistor's model against the one it extends with its input solved by hand: the source
+    ``u`` drives the model through ``R_a``, so the model sees ``v = u − R_a y`` with ``y = c·∇H + d v``
+    (``v = (u − R_a c·∇H)/(1 + R_a d)``); with a feedthrough ``d`` (the curling HASEL's) and without one
+    (the MSD HASEL's), at random states, to 1e-9 of the rates' size."""
+    from systems.curling_hasel import curling_hasel
+    from systems.msd_hasel import msd_hasel
+
+    s = curling_hasel(2) if make == "curling_hasel2" else msd_hasel()
+    where = SeriesResistance().attach_points(s)[0]
+    j = s.input_names.index(where)
+    a = SeriesResistance().augment(s, where, Scales.of(s)).system
+    Ra = 50 * a.param("series_resistance.R_a").value  # 50 times its start: the resistor matters
+    a = a.with_params({"series_resistance.R_a": Ra})
+
+    def parts(sysm):
+        f = {k: sysm.lambdify(getattr(sysm, k), with_u=False) for k in ("J", "R", "G", "P", "S", "N", "grad_H")}
+        return lambda x: {k: np.asarray(g(x, sysm.param_vector()), float).reshape(getattr(sysm, k).shape) for k, g in f.items()}
+
+    ps, pa = parts(s), parts(a)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        x = np.array([rng.uniform(0.1, 0.6) * st.typical if st.range is None else  # inside every declared range
+                      st.range[0] + rng.uniform(0.2, 0.8) * (st.range[1] - st.range[0]) for st in s.states])
+        u = rng.uniform(-1, 1, len(s.inputs)) * 100.0
+        m, n = pa(x), ps(x)
+        gh = n["grad_H"].reshape(-1)
+        c, d = (n["G"] + n["P"])[:, j], (n["S"] + n["N"])[j, :]
+        v = u.copy()
+        v[j] = (u[j] - Ra * (c @ gh + d @ u - d[j] * u[j])) / (1 + Ra * d[j])
+        want = (n["J"] - n["R"]) @ gh + (n["G"] - n["P"]) @ v
+        got = (m["J"] - m["R"]) @ m["grad_H"].reshape(-1) + (m["G"] - m["P"]) @ u
+        assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want))), (got, want)
