@@ -91,3 +91,29 @@ def test_the_resolution_ends_a_loosely_integrated_fit_early_and_in_the_same_plac
     for k, true in (("k.K", 400.0), ("b.b", 0.5)):
         assert abs(fit.values[k] - slow.values[k]) < 0.5 * fit.std_errors[k]
         assert abs(fit.values[k] - true) < 3 * fit.std_errors[k]
+
+
+def test_the_attainable_decrease_bounds_every_steps_prediction():
+    # the Gauss-Newton model at a Jacobian's point: no step predicts more than the full step, which predicts
+    # exactly the attainable decrease (two parameters, one far off: the full step is far larger than a small one)
+    from systems.examples import mass_spring_damper as msd
+
+    t = np.linspace(0.0, 2.0, 801)
+    u = np.where((t % 0.5) < 0.25, 1.0, -0.5)
+    y = simulate(msd(k=9.0, b=1.2), t, u={"F": u})["position"]
+    rec = Recording.from_arrays(t, {"F": u, "position": y})
+    system = msd(k=4.0, b=0.4)
+    p = np.array(system.param_vector(), float)
+    prob = sensitivities._Problem(system, rec, ["k.K", "b.b"], [], ["position"], {"position": 1.0}, np.zeros(2), [],
+                                  1e-9, None, params=p)
+    assert prob.attainable_decrease() == float("inf")  # before a first Jacobian
+    at = np.array([1.0, 1.0])
+    r, J = prob.jac(at)
+    full = at + np.linalg.lstsq(J, -r, rcond=None)[0]
+    best = prob.attainable_decrease()
+    assert 0 < best <= 0.5 * float(r @ r)
+    assert prob.predicted_decrease(full) == pytest.approx(best, rel=1e-9)
+    for dz in np.random.default_rng(0).standard_normal((50, 2)) * np.array([0.5, 0.5]):
+        assert prob.predicted_decrease(at + dz) <= best * (1 + 1e-12)
+    assert prob.predicted_decrease(at + 0.01 * (full - at)) < 0.05 * best  # a short step along it predicts little
+

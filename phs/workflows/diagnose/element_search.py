@@ -210,3 +210,40 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
         if best[1] <= f1(theta[k]):
             theta[k] = best[0]
     return theta
+
+
+PRESSED = 1e-6
+"""A fitted value within this share of its range's width (of its logarithm's, for a positive range spanning
+decades) of an end lies on that bound (:func:`_pressed`).  A numerical margin, not a measurement."""
+
+
+def _pressed(values: dict, data, system) -> list[str]:
+    """The free parameters of ``system`` whose fitted ``values`` lie on a bound of the fit (``data.bounds``,
+    else their declared range) and whose value the model was built with (``data.given``) lies inside it: a nominal fit
+    pressed against a bound is absorbing something the model lacks (a loop's delay absorbed by a damping
+    at its lower end), and an input element's alternating fit from there stays in that corner.
+
+    Examples
+    --------
+    >>> from phs.workflows.recording import Recording
+    >>> from phs.workflows.diagnose.hypotheses import Data
+    >>> rec = Recording.from_arrays(np.linspace(0, 1, 11), {"y": np.zeros(11)})
+    >>> d = Data(rec, rec, np.ones(11, bool), None, ["y"], ["b", "k"], {"b": (0.1, 10.0), "k": (1.0, 100.0)}, [], None,
+    ...          given={"b": 1.0, "k": 40.0})
+    >>> _pressed({"b": 0.1, "k": 39.9}, d, None), _pressed({"b": 0.5, "k": 39.9}, d, None)
+    (['b'], [])
+    """
+    out = []
+    for k in data.free:
+        if not data.given or k not in data.given or k not in values:
+            continue
+        lo, hi = (data.bounds or {}).get(k) or (system.param(k).range if system is not None else None) or (None, None)
+        if lo is None or hi is None or not lo < hi:
+            continue
+        v, g = float(values[k]), float(data.given[k])
+        f = (lambda x: math.log(x)) if lo > 0 and hi / lo >= 10**1.5 else (lambda x: x)
+        width = f(hi) - f(lo)
+        on = min(abs(f(v) - f(lo)), abs(f(hi) - f(v))) <= PRESSED * width if v > 0 or f is not math.log else False
+        if on and lo < g < hi and abs(f(g) - f(v)) > 10 * PRESSED * width:
+            out.append(k)
+    return out

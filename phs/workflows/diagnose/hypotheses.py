@@ -11,7 +11,7 @@ import numpy as np
 
 from codegen import Simulator
 from phs.errors import PHSError
-from phs.workflows.diagnose.element_search import REFINE_ITER, SCREEN_REFINE_ITER, element_search, extrapolate
+from phs.workflows.diagnose.element_search import PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, element_search, extrapolate  # noqa: F401
 from phs.workflows.diagnose.scoring import _channel_rss, _floors, bic, weight_squared  # noqa: F401  (bic re-exported)
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
@@ -121,6 +121,8 @@ class Data:
     given: dict | None = None  # the free parameters' values the model was built with (set by the nominal fit)
     carried: dict = field(default_factory=dict)  # accepted input elements its recordings already go through:
     #                            "effect@place" -> the element's fitted parameters (:func:`through_element`)
+    window: int | None = None  # leading training samples an input element's joint fit alternates on before its
+    #                            rounds on the whole recording (the screening's window; None: the whole)
 
     @property
     def n_train(self) -> int:
@@ -472,11 +474,9 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
     rtol = _fit_rtol(data, joint)
-    # a local search's parabolic step only when it promises more than one residual sample's share of the cost
-    n_res = max(1, len(rec.t) * len(outs))  # (Δχ² = 1 when the residual is the noise: within the standard error)
     from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
-    def cost_of(system, x0):
+    def cost_of(system, x0, rec=rec):
         sim = Simulator(system, rtol=rtol, energy=False)
         seen: dict = {}
 
@@ -494,13 +494,16 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
 
         return cost
 
-    def alternate(first, values, x0, neutral):
-        """One fit of an input element from the model values ``values``: the element's search (around ``first``,
-        or over its whole grid), never ending above ``neutral`` (the element's neutral point, when given), then
-        alternating refits of the model through it (:data:`ELEMENT_ROUNDS`, one when screening).  Returns
-        ``(theta, values, x0, recovery, training cost)``."""
-        cost = cost_of(base.with_params(values), x0)
+    def alternate(first, values, x0, neutral, rec=rec):
+        """One fit of an input element on the training recording ``rec`` (the whole, or a leading window of it)
+        from the model values ``values``: the element's search (around ``first``, or over its whole grid),
+        never ending above ``neutral`` (the element's neutral point, when given), then alternating refits of
+        the model through it (:data:`ELEMENT_ROUNDS`, one when screening).  Returns ``(theta, values, x0,
+        recovery, training cost)``."""
+        cost = cost_of(base.with_params(values), x0, rec)
         refine = REFINE_ITER if joint else SCREEN_REFINE_ITER
+        # a local search's parabolic step only when it promises more than one residual sample's share of the cost
+        n_res = max(1, len(rec.t) * len(outs))  # (Δχ² = 1 when the residual is the noise: within the standard error)
         theta = (element_search(cost, specs, first, local=True, refine_iter=refine, resolution=cost(first) / n_res)
                  if first is not None else element_search(cost, specs, [s[1] for s in specs], refine_iter=refine))
         if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
@@ -520,7 +523,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
                     if not recovery:
                         recovery = f"the refit of the model through the element failed ({reason(exc)}); kept the values before it"
                     break
-                cost = cost_of(base.with_params(fit.values), fit.x0)
+                cost = cost_of(base.with_params(fit.values), fit.x0, rec)
                 refitted = cost(theta)
                 if not refitted <= before:  # a refit that ends worse is not taken
                     break
@@ -534,66 +537,41 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
                 # the round, or the search after the refit, gained little: a next refit gains less still
                 if before - after <= ELEMENT_TOL * before or refitted - after <= ELEMENT_TOL * refitted:
                     break
-                moved = extrapolate(cost_of(base, x0), specs, data.free, data.bounds, start, (theta, values), after, ELEMENT_TOL)
+                moved = extrapolate(cost_of(base, x0, rec), specs, data.free, fit_bounds, start, (theta, values), after, ELEMENT_TOL)
                 stepped = moved is not None  # the element was not searched at the stepped model: the next round does
                 if stepped:
                     theta, values, after = moved
-                    cost = cost_of(base.with_params(values), x0)
+                    cost = cost_of(base.with_params(values), x0, rec)
                 before = after
         return theta, values, x0, recovery, cost(theta)
 
     base = _element_base(nominal, aug)
+    # the step along a round's move stays where the refits may go: the fit's bounds, else the declared ranges
+    fit_bounds = {k: tuple((data.bounds or {}).get(k) or base.param(k).range or (-math.inf, math.inf)) for k in data.free}
     if aug.starts:  # around a start (a refit's screened values), the whole grid when it does not hold
         start = aug.starts[0]
         first = [start.get(f"{el.effect}.{s[0]}", s[1]) for s in specs]
     else:
         first = None
-    theta, values, x0, recovery, c = alternate(first, dict(nominal.values), nominal.x0, el.neutral(rec.t, command(rec, where)))
+    # a joint fit alternates on the screening's leading window first (each round's refit costs the recording's
+    # length), then on the whole recording from there (:data:`Data.window`)
+    short = rec.window(rec.t[0], rec.t[data.window - 1]) if joint and data.window and data.window < len(rec) else rec
+    theta, values, x0, recovery, c = alternate(first, dict(nominal.values), nominal.x0, el.neutral(rec.t, command(rec, where)),
+                                               short)
     again = _pressed(nominal.values, data, base) if joint else []
     if again:  # the nominal fit pressed a parameter against its range: once more from the values the model was built with
         given = {**nominal.values, **{k: data.given[k] for k in data.free if k in data.given}}  # a later round frees accepted effects' too
-        other = alternate(None, given, nominal.x0, None)
+        other = alternate(None, given, nominal.x0, None, short)
         if other[4] < c:
             theta, values, x0, recovery, c = other
             recovery = (recovery + " " if recovery else "") + (
                 f"fitted from the model's own values of {', '.join(again)} (the nominal fit ended on a bound of their range)")
+    if short is not rec:  # the window's fit, on to the whole recording (never ending above the window's element)
+        whole = alternate(list(theta), values, x0, theta)
+        theta, values, x0, c = whole[0], whole[1], whole[2], whole[4]
+        recovery = " ".join(r for r in (recovery, whole[3]) if r)
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
     h = score(f"{aug.effect}@{where}", base, values, x0, len(data.free) + len(specs), data,
               augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
     h.recovery = recovery
     return _never_worse(nominal, h, aug, data, t0)
-
-
-PRESSED = 1e-6
-"""A fitted value within this share of its range's width (of its logarithm's, for a positive range spanning
-decades) of an end lies on that bound (:func:`_pressed`).  A numerical margin, not a measurement."""
-
-
-def _pressed(values: dict, data: Data, system) -> list[str]:
-    """The free parameters of ``system`` whose fitted ``values`` lie on a bound of the fit (``data.bounds``,
-    else their declared range) and whose value the model was built with (``data.given``) lies inside it: a nominal fit
-    pressed against a bound is absorbing something the model lacks (a loop's delay absorbed by a damping
-    at its lower end), and an input element's alternating fit from there stays in that corner.
-
-    Examples
-    --------
-    >>> rec = Recording.from_arrays(np.linspace(0, 1, 11), {"y": np.zeros(11)})
-    >>> d = Data(rec, rec, np.ones(11, bool), None, ["y"], ["b", "k"], {"b": (0.1, 10.0), "k": (1.0, 100.0)}, [], None,
-    ...          given={"b": 1.0, "k": 40.0})
-    >>> _pressed({"b": 0.1, "k": 39.9}, d, None), _pressed({"b": 0.5, "k": 39.9}, d, None)
-    (['b'], [])
-    """
-    out = []
-    for k in data.free:
-        if not data.given or k not in data.given or k not in values:
-            continue
-        lo, hi = (data.bounds or {}).get(k) or (system.param(k).range if system is not None else None) or (None, None)
-        if lo is None or hi is None or not lo < hi:
-            continue
-        v, g = float(values[k]), float(data.given[k])
-        f = (lambda x: math.log(x)) if lo > 0 and hi / lo >= 10**1.5 else (lambda x: x)
-        width = f(hi) - f(lo)
-        on = min(abs(f(v) - f(lo)), abs(f(hi) - f(v))) <= PRESSED * width if v > 0 or f is not math.log else False
-        if on and lo < g < hi and abs(f(g) - f(v)) > 10 * PRESSED * width:
-            out.append(k)
-    return out

@@ -294,7 +294,9 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, n
     order = sorted(top, key=lambda h: -h.seconds)
     tight = top[:TIGHT_REFITS]
     ftols = [REFIT_FTOL if any(h is t for t in tight) or h.augmentation.element is not None else RIVAL_FTOL for h in order]
-    full = _run_all(current, [_for_refit(h) for h in order], data, n_jobs, progress, label + " joint refit", ordered=True,
+    # an input element's joint refit alternates on the screening's window before the whole recording
+    refit_data = replace(data, window=len(short.recording)) if short is not data else data
+    full = _run_all(current, [_for_refit(h) for h in order], refit_data, n_jobs, progress, label + " joint refit", ordered=True,
                     ftols=ftols)
     done = {(f.augmentation.effect, f.augmentation.attached_to) for f in full}
     rest = [h for h in screened if (h.augmentation.effect, h.augmentation.attached_to) not in done]

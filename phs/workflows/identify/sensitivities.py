@@ -171,6 +171,7 @@ class _Problem:
         self._last = None  # (z bytes, states, window ends) of the last nominal simulation
         self._last_res = None  # (z and defect weight bytes, residual) of the last residual
         self._last_jac = None  # (z and defect weight bytes, residual, Jacobian) of the last Jacobian
+        self._attainable: dict = {}  # the last Jacobian's key: its Gauss-Newton step's predicted decrease
         self.cost_resolution = 0.0  # the cost's resolution at the last Jacobian's point (see _jac)
 
     # -- the coordinates ----------------------------------------------------------------------
@@ -328,6 +329,19 @@ class _Problem:
             return float("inf")
         Jd = J @ (z - at)
         return -float(r @ Jd + 0.5 * Jd @ Jd)
+
+    def attainable_decrease(self) -> float:
+        """The largest decrease of the cost ``½|r|²`` the residual's linearisation at the last Jacobian's
+        point predicts for any step (the full Gauss-Newton step's, ``½|P r|²`` with ``P`` the projection on
+        the Jacobian's columns; bounds ignored); infinite before a first Jacobian."""
+        if self._last_jac is None:
+            return float("inf")
+        key, r, J = self._last_jac
+        if key not in self._attainable:
+            step = np.linalg.lstsq(J, r, rcond=None)[0]
+            Jd = J @ step
+            self._attainable = {key: 0.5 * float(Jd @ Jd)}
+        return self._attainable[key]
 
     def _window_columns(self, k) -> slice:
         """Columns of ``z`` that are the start-state directions of window ``k``."""
