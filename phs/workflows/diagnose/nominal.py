@@ -129,7 +129,7 @@ def _fitted(system, data, n_jobs):
         whole = replace(data, x0=_state_dict(system, x0)) if data.estimate_x0 else data
         # from the window fit's weights: the weights of the same model on more of the same recording rarely
         # move by the re-weighting margin, so the polish is usually one fit
-        polished, _ = _fit_from(system.with_params({**fit.values, **values}), whole, {}, dict(fit.weights))
+        polished, _ = _fit_from(system.with_params(values), whole, {}, dict(fit.weights))
         if polished is None:  # the whole recording from every start, as for a short one
             label, fit, agreed, tried, _ = _best_start(system, data, tried, n_jobs)
         else:
@@ -143,15 +143,12 @@ def _call(fn, args):
     return fn(*args)
 
 
-def _check_weights(data, fit) -> dict:
-    """The channel weights of the plain check on ``data``: the given ones (``1 / std`` of each channel over
-    ``data``'s training recording where none is given); under ``"ml"`` those ``fit`` ended with, or without
-    a fit the ones maximum likelihood starts from (``1 / std``)."""
+def _check_weights(data) -> dict:
+    """The channel weights of the plain check on ``data``: the given ones, else ``1 / std`` of each channel
+    over ``data``'s training recording (under ``"ml"`` too: the weights maximum likelihood starts from)."""
     from phs.workflows.identify.coordinates import _channel_weights
 
-    if data.weights == "ml":
-        return dict(fit.weights) if fit is not None else _channel_weights(data.recording, data.outputs, None)
-    return _channel_weights(data.recording, data.outputs, data.weights)
+    return _channel_weights(data.recording, data.outputs, None if data.weights == "ml" else data.weights)
 
 
 def _cost(residuals: dict, weights: dict, outputs) -> float:
@@ -349,7 +346,7 @@ def _best_start(system, data, starts, n_jobs, check: bool = False):
     ``data`` beside them (:func:`checked`, with the channel weights the fits start from), else ``None``."""
     jobs = [(_fit_start, (system, data, start)) for _, start in starts]
     if check:
-        jobs.append((checked, (system, data, _check_weights(data, None))))
+        jobs.append((checked, (system, data, _check_weights(data))))
     outcomes = run_forked(_call, jobs, n_jobs)
     plain = outcomes.pop() if check else None
     tried = [(label, o[2]) for (label, _), o in zip(starts, outcomes, strict=True) if o[2] is not None]
