@@ -69,10 +69,10 @@ def test_long_recording_screens_on_its_window_and_refits_on_all(long_offset):
     assert off and abs(off[0] - 0.05) < 2e-3
 
 
-def test_separate_validation_is_screened_on_the_same_share():
-    # with a validation recording of its own, screening scores on its leading third too (the ranking
-    # compares each hypothesis with the nominal model on the same samples: the offset's mismatch is
-    # spread evenly, so the window is not extended); refits score on all of it
+def test_separate_validation_is_scored_whole_while_screening_fits_on_the_window():
+    # with a validation recording of its own, screening fits on the training recording's leading third and
+    # scores on all of the validation (one simulation each: the ranking sees every part of the program);
+    # refits fit and score on all of both
     t = np.arange(9000) * 2e-5
     u = np.where((t % 0.02) > 0.01, 1.0, 0.0)
     rng = np.random.default_rng(1)
@@ -87,7 +87,8 @@ def test_separate_validation_is_screened_on_the_same_share():
     screened = [h for h in d.hypotheses if h.ok and h.stage == "screening" and not h.no_improvement]
     full = [h for h in d.hypotheses if h.ok and h.stage == "full" and not h.no_improvement]
     assert screened and full
-    assert {len(h.simulated["validation"]["v_C"]) for h in screened} == {SCREEN_MIN_SAMPLES}
+    assert {len(h.residuals["v_C"]) for h in screened} == {SCREEN_MIN_SAMPLES}
+    assert {len(h.simulated["validation"]["v_C"]) for h in screened} == {len(t)}
     assert {len(h.simulated["validation"]["v_C"]) for h in full} == {len(t)}
     assert len(d.final.simulated["validation"]["v_C"]) == len(t)
 

@@ -4,7 +4,9 @@ verdict says so).
 
 The threshold is checked against its own statistics: two simulated courses equally far from the truth on
 either side (a rise of the residual that only the noise makes) are flagged at the normal tail's rate
-``P(Z > WORSE_Z)``, and a course moved away from the truth by a few noise levels is flagged every time."""
+``P(Z > WORSE_Z)``, a course moved away from the truth by half a noise level RMS is flagged every time, and
+one moved by a systematic rise smaller than the residual sum's own spread across draws of the noise
+(significant, not material) never."""
 
 from __future__ import annotations
 
@@ -35,8 +37,9 @@ def _course(x, i, fits=(90.0, 90.0)):
 
 def test_rises_that_only_the_noise_makes_are_flagged_at_the_normal_tail_rate():
     # before and after lie on either side of the truth, equally far: the rise's expectation is zero and its
-    # spread is the noise's (2σ|δ|); |δ| is 3 noise levels in norm, so the rise is of the noise's own size
-    delta = 3 * 0.05 * SHAPE / np.linalg.norm(SHAPE)
+    # spread is the noise's (2σ|δ|); |δ| is 40 noise levels in norm, so that this spread (80 σ²) is above the
+    # residual sum's own spread σ²√(2N) = 63 σ² and the significance part of the rule is the one that decides
+    delta = 40 * 0.05 * SHAPE / np.linalg.norm(SHAPE)
     before, after = _course(TRUTH["x"] - delta / 2, TRUTH["i"]), _course(TRUTH["x"] + delta / 2, TRUTH["i"])
     flagged = sum("x" in worsened(before, after, _data(seed)) for seed in range(2000))
     expected = 0.5 * math.erfc(WORSE_Z / math.sqrt(2))  # 2.3 %
@@ -46,13 +49,31 @@ def test_rises_that_only_the_noise_makes_are_flagged_at_the_normal_tail_rate():
 
 
 def test_a_course_moved_away_from_the_truth_is_flagged_every_time():
-    # after = the truth moved by 0.3 noise levels RMS: a rise of |δ|² = 0.09 σ² N = 180 σ², against the
-    # threshold 2·WORSE_Z σ|δ| = 54 σ² and a noise part of standard deviation 27 σ²
-    delta = 0.3 * 0.05 * math.sqrt(N) * SHAPE / np.linalg.norm(SHAPE)
+    # after = the truth moved by 0.5 noise levels RMS: a rise of |δ|² = 0.25 σ² N = 500 σ², against the
+    # thresholds 2·WORSE_Z σ|δ| = 89 σ² and WORSE_Z σ²√(2N) = 126 σ², and a noise part of standard deviation 45 σ²
+    delta = 0.5 * 0.05 * math.sqrt(N) * SHAPE / np.linalg.norm(SHAPE)
     before, after = _course(TRUTH["x"], TRUTH["i"]), _course(TRUTH["x"] + delta, TRUTH["i"])
     assert all("x" in worsened(before, after, _data(seed)) for seed in range(50))
     # and never the channel it left alone
     assert not any("i" in worsened(before, after, _data(seed)) for seed in range(50))
+
+
+def test_a_significant_rise_smaller_than_the_noise_spread_of_the_sum_is_not_flagged():
+    # after = the truth moved by |δ|² = 50 σ²: the rise (50 σ², noise part of standard deviation 2σ|δ| = 14 σ²)
+    # is above the significance threshold 2·WORSE_Z σ|δ| = 28 σ² in most draws, but far below the residual
+    # sum's own spread across draws of the noise (WORSE_Z σ²√(2N) = 126 σ²): another recording would show the
+    # two courses in either order, so the fit does not fall beyond what the noise allows
+    sigma = 0.05
+    delta = math.sqrt(50.0) * sigma * SHAPE / np.linalg.norm(SHAPE)
+    before, after = _course(TRUTH["x"], TRUTH["i"]), _course(TRUTH["x"] + delta, TRUTH["i"])
+    significant = 0
+    for seed in range(50):
+        data = _data(seed, sigma)
+        y = data.validation["x"]
+        rise = float(np.sum((y - after.simulated["validation"]["x"]) ** 2) - np.sum((y - before.simulated["validation"]["x"]) ** 2))
+        significant += rise > WORSE_Z * 2 * sigma * float(np.linalg.norm(delta))
+        assert worsened(before, after, data) == {}
+    assert significant >= 40  # the significance part alone would flag most (expected 94 %)
 
 
 def _scored(label, effect, vfits, x, i, rss, bic):

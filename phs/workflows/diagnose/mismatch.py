@@ -9,8 +9,13 @@ import numpy as np
 
 
 def noise_level(y) -> float:
-    """Standard deviation of white measurement noise estimated from second differences
-    (``std(Δ²y)/√6``; smooth signal content sampled fast contributes little).
+    """Standard deviation of white measurement noise estimated from second differences: the smaller of
+    ``std(Δ²y)/√6`` and ``1.4826 MAD(Δ²y)/√6`` (their median absolute deviation; smooth signal content
+    sampled fast contributes little to either).  Sparse fast transients (a capacitor's current at every step
+    of its voltage, an impact) inflate the standard deviation, not the median: on the electrostatic
+    actuator's current under a square-wave program the first alone reads 33 times the noise added, the
+    second within 2 % of it.  A quantised or held channel, whose second differences are mostly exactly
+    equal (a median absolute deviation of zero), keeps the first.
 
     Examples
     --------
@@ -18,9 +23,32 @@ def noise_level(y) -> float:
     >>> t = np.linspace(0, 1, 5001)
     >>> round(noise_level(np.sin(2 * np.pi * t) + 0.01 * rng.standard_normal(t.size)), 3)
     0.01
+    >>> spikes = np.where(np.arange(t.size) % 500 == 0, 5.0, 0.0)   # a current's spike at every step
+    >>> round(noise_level(spikes + 0.01 * rng.standard_normal(t.size)), 3)
+    0.01
+    >>> noise_level(np.round(np.sin(2 * np.pi * t), 2)) > 0      # quantised: the standard deviation's estimate
+    True
     """
     y = np.asarray(y, float)
-    return float(np.std(np.diff(y, 2)) / math.sqrt(6.0)) if y.size > 3 else 0.0
+    if y.size <= 3:
+        return 0.0
+    by_std = float(np.std(np.diff(y, 2))) / math.sqrt(6.0)
+    by_median = median_noise(y)
+    return min(by_std, by_median) if by_median > 0 else by_std
+
+
+def median_noise(y) -> float:
+    """White-noise std from the median absolute deviation of second differences (``1.4826 MAD / √6``): zero for
+    a quantised or held channel (most second differences exactly equal).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> round(median_noise(0.01 * rng.standard_normal(20000)), 3), median_noise(np.repeat([0.0, 1.0], 50))
+    (0.01, 0.0)
+    """
+    d = np.diff(np.asarray(y, float), 2)
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(6.0)) if d.size else 0.0
 
 
 def _features(scored, system, data) -> tuple[dict, dict]:

@@ -202,8 +202,8 @@ def screening_samples(current, data, noise: dict | None = None) -> int:
 
 
 def validation_samples(current, data, noise: dict | None, share: float) -> int:
-    """Leading samples of a separate validation recording that screening scores on: ``share`` of it
-    (the training window's), extended like the training window (:func:`screening_samples`) until it holds
+    """Leading samples of a separate validation recording that the discovery's forward selection scores on
+    (:func:`~phs.workflows.diagnose.discover.selection._window`): ``share`` of it (the training window's), extended like the training window (:func:`screening_samples`) until it holds
     at least half its share in time of ``current``'s validation mismatch above the noise, so that the
     window does not leave out the part of the validation program where the model fails.  A split
     recording's validation part is kept whole (it lies at the end of the recording).
@@ -257,15 +257,17 @@ def _mismatch_extent(res: dict, rec, data, noise: dict | None, m0: int) -> int:
 
 def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, noise=None):
     """Screen every hypothesis by a loose joint fit (few iterations, input elements by their search alone)
-    on the leading part of the training recording (:func:`screening_samples`) and scored on the leading
-    part of a separate validation recording (:func:`validation_samples`), then refit the ``refit_top`` most promising to convergence and
-    score them on all of both."""
+    on the leading part of the training recording (:func:`screening_samples`), scored on the whole
+    validation, then refit the ``refit_top`` most promising to convergence and score them on all of both."""
     if refit_top <= 0 or len(augs) <= refit_top:
         return _run_all(current, augs, data, n_jobs, progress, label)
     from phs.workflows.diagnose.hypotheses import score
 
     m = screening_samples(current, data, noise)
-    short = data.head(m, validation_samples(current, data, noise, m / len(data.recording)))
+    # scored on the whole validation recording: the window's fits are ranked on every part of the program (a
+    # leading window of it ranked the lab charge retention below a series resistance once the current's
+    # noise level was read right: the window's end moved off the program's part where the two differ)
+    short = data.head(m)
     base = current
     if short is not data:  # the model the hypotheses extend, scored on the same window
         from phs.workflows.diagnose.retry import RECOVERABLE

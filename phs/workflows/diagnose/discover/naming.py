@@ -42,24 +42,20 @@ def explained_share(reference, h, data, noise: dict) -> float:
     >>> explained_share(NS(validation_rss=3.0), NS(validation_rss=2.0), data, {"y": 0.25})  # floor 1.0
     0.5
     """
+    from phs.workflows.diagnose.mismatch import median_noise
+
     floor = 0.0
     for ch in data.outputs:
         y = np.asarray(data.validation[ch], float)[data.val_mask]
         weights = getattr(data, "weights", None)  # the scores' channel weights (default 1 / std)
         w2 = weights[ch] ** 2 if isinstance(weights, dict) else 1.0 / (float(np.var(y)) or 1.0)
-        sigma = min([float(noise.get(ch, 0.0)), _robust_noise(y)] + [_residual_noise(m, ch, y, data.val_mask) for m in (reference, h)])
+        sigma = min([float(noise.get(ch, 0.0)), median_noise(y)] + [_residual_noise(m, ch, y, data.val_mask) for m in (reference, h)])
         sigma = sigma if noise.get(ch) else 0.0
         floor += len(y) * sigma**2 * w2
     room = reference.validation_rss - floor
     if not (math.isfinite(room) and room > 0 and math.isfinite(h.validation_rss)):
         return 0.0
     return float(np.clip((reference.validation_rss - h.validation_rss) / room, 0.0, 1.0))
-
-
-def _robust_noise(y) -> float:
-    """White-noise std from the median absolute deviation of second differences (``1.4826 MAD / √6``)."""
-    d = np.diff(np.asarray(y, float), 2)
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(6.0)) if d.size else 0.0
 
 
 def _residual_noise(model, ch, y, mask) -> float:
