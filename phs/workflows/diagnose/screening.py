@@ -203,8 +203,9 @@ def screening_samples(current, data, noise: dict | None = None) -> int:
 
 def validation_samples(current, data, noise: dict | None, share: float) -> int:
     """Leading samples of a separate validation recording that the discovery's forward selection scores on
-    (:func:`~phs.workflows.diagnose.discover.selection._window`): ``share`` of it (the training window's), extended like the training window (:func:`screening_samples`) until it holds
-    at least half its share in time of ``current``'s validation mismatch above the noise, so that the
+    (:func:`~phs.workflows.diagnose.discover.selection._window`): ``share`` of it (the training window's),
+    extended like the training window (:func:`screening_samples`) until it holds at least half its share in
+    time of ``current``'s validation mismatch above the noise, so that the
     window does not leave out the part of the validation program where the model fails.  A split
     recording's validation part is kept whole (it lies at the end of the recording).
 
