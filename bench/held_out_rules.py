@@ -69,9 +69,6 @@ RULES: dict = {
     # refits run to REFIT_FTOL for the best TIGHT_REFITS screened, the rest to RIVAL_FTOL: 3 (refit_top),
     # every refit tight (the rule off); 1, only the best
     "TIGHT_REFITS": ((f"{D}.screening",), (3, 1)),
-    # a screened hypothesis beyond the best is refitted when its screening ΔBIC <= this (and its gain > 0):
-    # inf, the rule off (every one of the refit_top with a gain); -10, only with MIN_BIC_GAIN's evidence
-    "REFIT_EVIDENCE": ((f"{D}.screening",), (math.inf, -10.0)),
     # hypotheses within this relative margin of the best (validation and training residual) are equally
     # good and the simplest wins: 0, the best alone (the rule off); 0.1, a wider margin
     "SUFFICIENT_MARGIN": ((f"{D}.ranking", D), (0.0, 0.1)),

@@ -57,8 +57,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         Processes fitting hypotheses in parallel (default: the number of CPUs, at most 4).
     refit_top : int
         Every hypothesis is first screened by a loose joint fit (a few evaluations); of the ``refit_top``
-        most promising, the best and those whose screening pays for its new parameters
-        (:data:`~phs.workflows.diagnose.screening.REFIT_EVIDENCE`) are then refitted to convergence
+        most promising, the best and those whose screening lowered the validation residual are then refitted
+        to convergence
         (0: every hypothesis is fitted to convergence).
     progress : bool
         Print one line per fitted hypothesis on stderr.

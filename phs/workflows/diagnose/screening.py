@@ -281,7 +281,7 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, n
     screened = _run_all(base, augs, short, n_jobs, progress, label + " screening", joint=False)
     screened.sort(key=lambda h: (not h.ok, -_gain(current, h)))
     top, seen = [], set()
-    for h in screened:  # the most promising distinct effects (one attachment each); beyond the best, only with evidence
+    for h in screened:  # the most promising distinct effects (one attachment each); beyond the best, only with a gain
         if h.ok and h.augmentation.effect not in seen and len(top) < refit_top and (not top or _evidence(base, h)):
             top.append(h)
             seen.add(h.augmentation.effect)
@@ -316,21 +316,12 @@ viscoelastic creep first and the refits choose the charge retention, whose polis
 others; the third there, the stiff hysteresis, stops after 10 evaluations of 1.6 s instead of 14.
 Chosen on that case (seed 1)."""
 
-REFIT_EVIDENCE = 0.0
-"""Screening ΔBIC at or below which a hypothesis other than the best screened one is refitted: a screening
-fit that does not even pay for its new parameters is not refitted (the best one always is).  Measured on
-the 28 concealed 3 s cases of ``python bench/refit_evidence.py`` (every effect at full and at 0.35 of its
-strength): no hypothesis screened above it was accepted after its refit, while gains grew up to tenfold
-between screening and refit for hypotheses screened below it (a slow new state far from its start).
-Chosen on those cases (seed 1)."""
-
-
 def _evidence(base, h) -> bool:
-    """Whether a screened hypothesis shows evidence worth a refit: ΔBIC against ``base`` at most
-    :data:`REFIT_EVIDENCE` and a lower validation residual."""
-    from phs.workflows.diagnose.ranking import _delta_bic
-
-    return _delta_bic(base, h) <= REFIT_EVIDENCE and _gain(base, h) > 0
+    """Whether a screened hypothesis beyond the best is worth a refit: its screening lowered the validation
+    residual.  A screening ΔBIC threshold beside it (refit only when the screening fit pays for its new
+    parameters) was removed: on the 40 held-out concealed cases (seed 4) it got one verdict fewer right and a
+    Brier score of 0.057 against 0.037 without it (``python bench/held_out_rules.py``)."""
+    return _gain(base, h) > 0
 
 
 def _progress(progress, label, k, n, h):
