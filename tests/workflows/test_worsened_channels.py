@@ -107,3 +107,23 @@ def test_the_rule_reads_the_channels_through_the_validation_mask():
     assert worsened(before, after, data) == {}
     data.val_mask = np.ones(N, bool)
     assert "x" in worsened(before, after, data)
+
+
+def test_a_none_verdict_whose_best_trades_channels_says_so_in_its_first_sentence():
+    # the best candidate passes the fit rule (validation residual -20 %, BIC -50) and was refused only because
+    # it lowers another channel's validation fit: the verdict must not open with "no candidate improves the fit"
+    from phs.workflows.diagnose.hypotheses import Scored
+    from phs.workflows.diagnose.report import explanation
+
+    aug = NS(effect="offset", attached_to="position", component="Offset", summary="", free=[], element=None)
+    nominal = Scored("nominal", None, {}, np.zeros(2), 3, {}, {}, 1.0, 1.0, 100.0, {}, {}, 0.1)
+    best = Scored("offset@position", None, {}, np.zeros(2), 4, {}, {}, 0.8, 0.8, 50.0, {}, {}, 0.1, aug)
+    best.worsens = {"current": (94.7, 92.2)}
+    text = explanation(nominal, [], [], best, ["position", "current"])
+    assert text.startswith("No missing physics accepted: the best candidate, offset at position, improves the fit "
+                           "(validation residual −20.0 % (fell), ΔBIC -50.0) only by lowering another channel's."), text
+    assert "beyond what noise explains" not in text
+    # a best candidate that trades channels but would not pass the fit rule anyway (validation residual -0.5 %)
+    plain = Scored("offset@position", None, {}, np.zeros(2), 4, {}, {}, 0.995, 0.995, 99.0, {}, {}, 0.1, aug)
+    plain.worsens = {"current": (94.7, 92.2)}
+    assert explanation(nominal, [], [], plain, ["position"]).startswith("No missing physics found: no candidate improves")

@@ -13,7 +13,7 @@ import numpy as np
 
 from phs.io import write_all_atomic, write_atomic
 from phs.workflows.diagnose.mismatch import _features
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_VALIDATION_GAIN, _delta_bic, _gain, residual_change
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, MIN_VALIDATION_GAIN, _accepted, _delta_bic, _gain, residual_change
 
 # which located findings speak for which effect (used to say where an effect showed)
 _EVIDENCE = {
@@ -54,6 +54,10 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
         white = [f for f in findings if f.kind == "whiteness"]
         tail = (" The residual " + ("looks white" if all(f.details.get("p_value", 0) > 0.01 for f in white) else "keeps some structure")
                 + " (" + "; ".join(f"{f.channel}: {f.where}" for f in white) + ").") if white else ""
+        if getattr(rival, "worsens", None) and _accepted(nominal, rival):  # it pays, but at another channel's cost
+            return (f"No missing physics accepted: the best candidate, {rival.augmentation.effect} at "
+                    f"{rival.augmentation.attached_to}, improves the fit (validation residual {residual_change(g)}, ΔBIC "
+                    f"{_delta_bic(nominal, rival):+.1f}) only by lowering another channel's.{tail}")
         return (f"No missing physics found: no candidate improves the fit beyond what noise explains. The best, "
                 f"{rival.augmentation.effect} at {rival.augmentation.attached_to}: validation residual "
                 f"{residual_change(g)}, ΔBIC {_delta_bic(nominal, rival):+.1f} (acceptance needs −1 % and −10 or lower).{tail}")

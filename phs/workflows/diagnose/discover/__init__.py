@@ -116,6 +116,7 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0, library_share: f
         library = (verdict["explanation"]
                    .replace("No missing physics found: no candidate improves the fit beyond what noise explains. The best,",
                             "No library candidate explains it: the best,")
+                   .replace("No missing physics accepted: the best candidate,", "No library candidate is accepted: the best,")
                    .replace("No candidate could be fitted; the nominal model stands.", "No library candidate could be fitted."))
         out["explanation"] = discovery.text + " " + library
         out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)
