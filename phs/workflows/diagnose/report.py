@@ -45,20 +45,28 @@ def _fits(nominal, h, outs) -> str:
     return "; ".join(parts)
 
 
+NONE_FOUND = "No missing physics found: no candidate improves the fit beyond what noise explains. The best,"
+"""How a ``none`` verdict's explanation opens when no candidate passes the fit rule (reworded by a discovery)."""
+NONE_TRADED = "No missing physics accepted: the best candidate,"
+"""How it opens when the best candidate passes the fit rule but lowers another channel's validation fit."""
+NONE_FITTED = "No candidate could be fitted; the nominal model stands."
+"""How it opens when no candidate could be fitted."""
+
+
 def explanation(nominal, accepted, findings, rival, outs) -> str:
     """Plain-language verdict (see :func:`phs.diagnose`)."""
     if not accepted:
         if rival is None:
-            return "No candidate could be fitted; the nominal model stands."
+            return NONE_FITTED
         g = _gain(nominal, rival)
         white = [f for f in findings if f.kind == "whiteness"]
         tail = (" The residual " + ("looks white" if all(f.details.get("p_value", 0) > 0.01 for f in white) else "keeps some structure")
                 + " (" + "; ".join(f"{f.channel}: {f.where}" for f in white) + ").") if white else ""
         if getattr(rival, "worsens", None) and _accepted(nominal, rival):  # it pays, but at another channel's cost
-            return (f"No missing physics accepted: the best candidate, {rival.augmentation.effect} at "
+            return (f"{NONE_TRADED} {rival.augmentation.effect} at "
                     f"{rival.augmentation.attached_to}, improves the fit (validation residual {residual_change(g)}, ΔBIC "
                     f"{_delta_bic(nominal, rival):+.1f}) only by lowering another channel's.{tail}")
-        return (f"No missing physics found: no candidate improves the fit beyond what noise explains. The best, "
+        return (f"{NONE_FOUND} "
                 f"{rival.augmentation.effect} at {rival.augmentation.attached_to}: validation residual "
                 f"{residual_change(g)}, ΔBIC {_delta_bic(nominal, rival):+.1f} (acceptance needs −1 % and −10 or lower).{tail}")
     from components.candidates import LIBRARY

@@ -113,11 +113,12 @@ def amend_verdict(verdict: dict, discovery, scale: float = 1.0, library_share: f
     leads = verdict["effect"] != "none" and library_share is not None and library_share < lead_below <= discovery.share
     if verdict["effect"] == "none":
         out["effect"] = "discovered"
+        from phs.workflows.diagnose.report import NONE_FITTED, NONE_FOUND, NONE_TRADED
+
         library = (verdict["explanation"]
-                   .replace("No missing physics found: no candidate improves the fit beyond what noise explains. The best,",
-                            "No library candidate explains it: the best,")
-                   .replace("No missing physics accepted: the best candidate,", "No library candidate is accepted: the best,")
-                   .replace("No candidate could be fitted; the nominal model stands.", "No library candidate could be fitted."))
+                   .replace(NONE_FOUND, "No library candidate explains it: the best,")
+                   .replace(NONE_TRADED, "No library candidate is accepted: the best,")
+                   .replace(NONE_FITTED, "No library candidate could be fitted."))
         out["explanation"] = discovery.text + " " + library
         out["confidence"] = round((0.5 + 0.5 * discovery.share) * scale, 3)
     elif leads:
