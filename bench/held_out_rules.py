@@ -89,6 +89,19 @@ RULES: dict = {
     "POINTER_SHARE": ((f"{D}.consistency",), (0.0, math.inf)),
     # the confidence of a verdict that names nothing of the pointed family is scaled by this: 1, not scaled
     "DISAGREE_FACTOR": ((f"{D}.consistency",), (1.0,)),
+    # the constants that trade time: the cheaper value first (a held-out figure for the time saved), then
+    # a costlier one (what the time buys).  Gauss-Newton evaluations of a screening fit
+    "SCREEN_ITER": ((f"{D}.hypotheses",), (3, 8)),
+    # starts a screening fit runs from (the cheapest at their start)
+    "SCREEN_STARTS": ((f"{D}.hypotheses",), (1, 4)),
+    # least relative tolerance of a screening fit's integration
+    "SCREEN_RTOL": ((f"{D}.hypotheses",), (1e-5, 1e-8)),
+    # the nominal fit's stopping point (relative cost decrease)
+    "NOMINAL_FTOL": ((f"{D}.nominal",), (1e-4, 1e-8)),
+    # rounds of an input element's joint fit (alternating its search and the model's refit)
+    "ELEMENT_ROUNDS": ((f"{D}.hypotheses",), (1, 16)),
+    # noise surrogates per channel behind the located findings' thresholds
+    "N_SURROGATES": ((f"{D}.locate._common", f"{D}.locate", f"{D}.locate.features"), (50, 200)),
 }
 """Per rule: the modules whose attribute of that name is set (where it is defined, and every module that
 imports it by name and reads it), and the values tried."""
