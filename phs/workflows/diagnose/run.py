@@ -14,7 +14,7 @@ from phs.errors import InputDataError, ParameterError
 from phs.workflows.diagnose.consistency import pointers, reconcile
 from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, _gain, _pick, partial
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, _accepted, _gain, _pick, partial, worsened
 from phs.workflows.diagnose.refusal import refusal
 from phs.workflows.diagnose.result import Diagnosis, _verdict
 from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _refit_pointed, _screen_and_refit
@@ -157,6 +157,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     findings = _locate(nominal, system, data, noise)
     pointed = pointers(findings, momentum_states(system))
     current, accepted, all_hyps, rounds, small = nominal, [], [], [], []
+    trial, untried = None, None  # a provisional first of a pair (_traded) and, when no second made it whole, what was tried
     located, located_at, pointed_r = findings, nominal, pointed  # the located mismatch of ``located_at``
     for round_ in range(max_effects):
         res = train_result(current, data)
@@ -201,10 +202,14 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         if round_ == 0:
             all_hyps = hyps
 
-        def choose(hyps=hyps, current=current, data_r=data_r, later=round_ > 0):
+        def choose(hyps=hyps, current=current, data_r=data_r, later=round_ > 0, trial=trial):
             # a later effect also explains at least LATER_SHARE of what the nominal model misses, beside what
-            # the accepted effects explain
-            return _pick(current, [h for h in hyps if not later or _adds_share(nominal, current, h, data_r, noise)], data_r)
+            # the accepted effects explain; the second of a provisional pair also makes the pair pass the
+            # acceptance rule against the model before the first, lowering none of its channels
+            ok = [h for h in hyps if not later or _adds_share(nominal, current, h, data_r, noise)]
+            if trial is not None:
+                ok = [h for h in ok if _whole(trial[1], h, data_r)]
+            return _pick(current, ok, data_r)
 
         pick = choose()
         for refit in (_refit_deferred, _refit_friction_rival):  # screened rivals the choice needs refitted
@@ -220,10 +225,25 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         unfiltered = _pick(current, hyps, data_r) if round_ > 0 else None
         if unfiltered is not None and unfiltered is not pick and (unfiltered.later_share or 0.0) < LATER_SHARE:
             small.append(unfiltered)  # it would have been named: the verdict says why not
+        lowers = None  # what the first of a pair on trial lowers alone (_traded)
+        if pick is None and trial is None and round_ + 1 < max_effects:
+            pick = _traded(current, hyps)
+            lowers = dict(pick.worsens) if pick is not None else None
+        elif pick is not None and trial is not None:
+            pick.notes.append(f"Together with {trial[0].label}, which alone lowers {', '.join(trial[4])} (validation fit "
+                              f"{_fits(trial[4])}), it raises the fit without lowering any channel's.")
+            trial = None
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
             pick = _polished(current, pick, data_r, progress, f"round {round_ + 1}")  # a rival's looser refit, finished
             hyps.insert(0, pick)
+        if lowers is not None:
+            trial = (pick, current, data, len(small), lowers)
+        if pick is None and trial is not None:  # no second effect makes the pair on trial whole: neither is named
+            untried = (trial[0], trial[4], [h.label for h in hyps if h.ok and h.stage == "full"])
+            current, data, accepted, small = trial[1], trial[2], accepted[:-1], small[:trial[3]]
+            rounds.pop()  # measured against a model that is not kept
+            break
         if pick is None:
             break
         accepted.append(pick)
@@ -233,7 +253,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         # least the LATER_SHARE of the nominal model's mismatch a later effect must add (a coloured residual
         # near the noise opened a round that named a spurious second effect on the 3 s concealed input
         # saturation: charge retention, the current's validation fit 96.0 -> 95.4 %)
-        if not _structured(current, noise, outs) or 1.0 - explained_share(nominal, current, data, noise) < LATER_SHARE:
+        if trial is None and (not _structured(current, noise, outs) or 1.0 - explained_share(nominal, current, data, noise) < LATER_SHARE):
             break
         # the mismatch the model with the accepted effects leaves, located again: what the located family's
         # full fits are chosen on in the next round
@@ -281,13 +301,19 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         final_findings = _locate(final, final.system, data, noise)
     failed = [h for r in rounds for h in r if not h.ok]
     verdict = _verdict(nominal, accepted, all_hyps, findings, outs, failed)
-    worse = list({h.label: h for r in rounds for h in r if h.ok and h.worsens}.values())
+    named = {a.label for a in accepted}
+    worse = list({h.label: h for r in rounds for h in r if h.ok and h.worsens and h.label not in named}.values())
     if worse:  # improving hypotheses the choice passed over: each lowers another channel's validation fit
         from phs.workflows.diagnose.report import worsening_sentence
 
         verdict["explanation"] += worsening_sentence(worse)
         verdict["worsened"] = [{"hypothesis": h.label, "channels": {ch: {"before": a, "after": b} for ch, (a, b) in h.worsens.items()}}
                                for h in worse]
+    if untried is not None:
+        verdict["explanation"] += (f" {untried[0].label}, which lowers {', '.join(untried[1])}, was also fitted together with "
+                                   f"each candidate of a second round ({len(untried[2])} fitted in full): no pair raised the fit "
+                                   "without lowering a channel's.")
+        verdict["pair_tried"] = {"first": untried[0].label, "seconds": untried[2]}
     if small and accepted:  # (a correction that replaced the accepted effects makes them moot)
         from phs.workflows.diagnose.report import small_share_sentence
 
@@ -401,6 +427,47 @@ def _adds_share(nominal, current, h, data, noise) -> bool:
         return True
     h.later_share = explained_share(nominal, h, data, noise) - explained_share(nominal, current, data, noise)
     return h.later_share >= LATER_SHARE
+
+
+def _traded(current, hyps):
+    """The hypothesis a pair is tried from when none is accepted: the best (largest validation gain) of those
+    that pass the acceptance rule against ``current`` but lower another channel's validation fit
+    (``Scored.worsens``); None when there is none.  An effect that trades channels may be one of two missing
+    ones, the other the cause of what it lowers: it is accepted only with a second effect, of the next
+    round, with which the pair passes the acceptance rule against ``current`` and lowers none of its
+    channels.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> base = NS(validation_rss=1.0, bic=0.0)
+    >>> h = NS(ok=True, stage="full", validation_rss=0.5, bic=-50.0, reference_rss=None, reference_bic=None,
+    ...        worsens={"current": (95.0, 90.0)})
+    >>> _traded(base, [h]) is h
+    True
+    >>> h.worsens = {}
+    >>> _traded(base, [h]) is None
+    True
+    """
+    traded = [h for h in hyps if h.worsens and _accepted(current, h)]
+    return max(traded, key=lambda h: _gain(current, h)) if traded else None
+
+
+def _whole(before, h, data) -> bool:
+    """Whether ``h``, the second of a pair whose first was on trial, passes with it the acceptance rule
+    against ``before`` (the model without either: BIC :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`
+    lower, validation residual :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` lower) and lowers
+    none of its channels' validation fits (:func:`~phs.workflows.diagnose.ranking.worsened`)."""
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+
+    if not (h.ok and h.stage == "full") or before.validation_rss <= 0:
+        return False
+    gain = (before.validation_rss - h.validation_rss) / before.validation_rss
+    return before.bic - h.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and not worsened(before, h, data)
+
+
+def _fits(worsens) -> str:
+    return ", ".join(f"{ch} {a:.2f} → {b:.2f} %" for ch, (a, b) in worsens.items())
 
 
 def _coloured(findings, h, data) -> bool:
