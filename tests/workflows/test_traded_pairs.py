@@ -59,20 +59,41 @@ def test_an_effect_that_trades_channels_is_named_only_with_a_second_that_makes_t
     assert "pair_tried" not in d.verdict
 
 
-def test_without_a_second_that_makes_the_pair_whole_neither_is_named(short, monkeypatch):
-    # the two effects the full library's diagnosis names, as the only candidates (a shorter run), and no
-    # second counted as making the pair whole
+def _restricted(short):
+    # the two effects the full library's diagnosis names, as the only candidates (a shorter run)
     from components.candidates import LIBRARY
 
+    names = {h.augmentation.effect for h in short[0].accepted}
+    return _diagnose(3.0, [c for c in LIBRARY if c.effect in names])[0]
+
+
+def test_without_a_second_that_makes_the_pair_whole_neither_is_named(short, monkeypatch):
     d0, _ = short
     monkeypatch.setattr(run, "_whole", lambda before, h, data: False)
-    names = {h.augmentation.effect for h in d0.accepted}
-    d, _ = _diagnose(3.0, [c for c in LIBRARY if c.effect in names])
+    d = _restricted(short)
     assert d.verdict["effects"] == [] and d.final is d.nominal and len(d.rounds) == 1, d.summary()
     tried = d.verdict["pair_tried"]
     assert tried["first"] == d0.accepted[0].label and d0.accepted[1].label in tried["seconds"]
     assert d.verdict["explanation"].startswith("No missing physics accepted")
     assert "was also fitted together with each candidate of a second round" in d.verdict["explanation"]
+
+
+def test_a_first_that_does_not_earn_its_place_beside_the_second_is_not_named(short, monkeypatch):
+    # the pair judged against its second fitted alone from the nominal model: when the first does not earn
+    # its place there, the second alone is named if it passes the acceptance rule without lowering a channel
+    d0, _ = short
+    monkeypatch.setattr(run, "_earns", lambda with_first, alone: False)
+    d = _restricted(short)
+    second = d0.accepted[1].label
+    tried = d.verdict["pair_tried"]
+    assert tried["first"] == d0.accepted[0].label and tried["second"] == second, d.summary()
+    assert "does not earn its place beside it" in d.verdict["explanation"]
+    assert len(d.rounds) == 1
+    if tried["second_named_alone"]:
+        assert [h.label for h in d.accepted] == [second] and d.rounds[0][0] is d.accepted[0]
+        assert worsened(d.nominal, d.accepted[0], d.data) == {}
+    else:
+        assert d.verdict["effects"] == []
 
 
 @pytest.mark.slow

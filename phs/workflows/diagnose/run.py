@@ -230,8 +230,19 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             pick = _traded(current, hyps)
             lowers = dict(pick.worsens) if pick is not None else None
         elif pick is not None and trial is not None:
+            alone = _second_alone(trial, pick, rounds[0], progress, f"round {round_ + 1}")
+            if alone is not None and not _earns(pick, alone):  # the first does not earn its place beside the second
+                untried = (trial[0], trial[4], [h.label for h in hyps if h.ok and h.stage == "full"], pick, alone)
+                current, data, accepted, small = trial[1], trial[2], accepted[:-1], small[:trial[3]]
+                rounds.pop()
+                if _whole(current, alone, data):  # the second alone is the verdict
+                    rounds[0][:] = [alone] + [h for h in rounds[0] if h.label != alone.label]
+                    accepted.append(alone)
+                    current, data = alone, through_element(data, alone)
+                break
             pick.notes.append(f"Together with {trial[0].label}, which alone lowers {', '.join(trial[4])} (validation fit "
-                              f"{_fits(trial[4])}), it raises the fit without lowering any channel's.")
+                              f"{_fits(trial[4])}), it raises the fit without lowering any channel's"
+                              + (f", and the pair passes the acceptance rule against {alone.label} alone." if alone is not None else "."))
             trial = None
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
             hyps.remove(pick)
@@ -309,11 +320,18 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         verdict["explanation"] += worsening_sentence(worse)
         verdict["worsened"] = [{"hypothesis": h.label, "channels": {ch: {"before": a, "after": b} for ch, (a, b) in h.worsens.items()}}
                                for h in worse]
-    if untried is not None:
+    if untried is not None and len(untried) == 3:
         verdict["explanation"] += (f" {untried[0].label}, which lowers {', '.join(untried[1])}, was also fitted together with "
                                    f"each candidate of a second round ({len(untried[2])} fitted in full): no pair raised the fit "
                                    "without lowering a channel's.")
         verdict["pair_tried"] = {"first": untried[0].label, "seconds": untried[2]}
+    elif untried is not None:
+        verdict["explanation"] += (f" {untried[0].label}, which alone lowers {', '.join(untried[1])}, was also tried as the first of a "
+                                   f"pair with {untried[4].label}, but does not earn its place beside it (the pair against "
+                                   f"{untried[4].label} alone: BIC {untried[3].bic - untried[4].bic:+.1f}, validation residual "
+                                   f"{100 * (untried[3].validation_rss / untried[4].validation_rss - 1):+.1f} %).")
+        verdict["pair_tried"] = {"first": untried[0].label, "seconds": untried[2], "second": untried[4].label,
+                                 "second_named_alone": bool(accepted)}
     if small and accepted:  # (a correction that replaced the accepted effects makes them moot)
         from phs.workflows.diagnose.report import small_share_sentence
 
@@ -451,6 +469,22 @@ def _traded(current, hyps):
     """
     traded = [h for h in hyps if h.worsens and _accepted(current, h)]
     return max(traded, key=lambda h: _gain(current, h)) if traded else None
+
+
+def _second_alone(trial, pick, first_round, progress, label):
+    """The second of a pair on trial (``pick``, fitted against the first) fitted alone against the model
+    without either: its hypothesis of the trial's round (the same effect at the same place) when that was
+    fitted in full, else that hypothesis refitted in full from its screening; None when it has none or its
+    fit failed (the pair is then judged against that model alone)."""
+    from phs.workflows.diagnose.screening import _for_refit, _run_all
+
+    same = [h for h in first_round if h.ok and h.label == pick.label]
+    if not same:
+        return None
+    if same[0].stage == "full":
+        return same[0]
+    h = _run_all(trial[1], [_for_refit(same[0])], trial[2], 1, progress, label + " the second alone")[0]
+    return h if h.ok else None
 
 
 def _whole(before, h, data) -> bool:
