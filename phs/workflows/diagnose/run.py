@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -208,7 +209,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             # acceptance rule against the model before the first, lowering none of its channels
             ok = [h for h in hyps if not later or _adds_share(nominal, current, h, data_r, noise)]
             if trial is not None:
-                ok = [h for h in ok if _whole(trial[1], h, data_r)]
+                ok = [h for h in ok if _whole(trial.before, h, data_r)]
             return _pick(current, ok, data_r)
 
         pick = choose()
@@ -232,16 +233,16 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         elif pick is not None and trial is not None:
             alone = _second_alone(trial, pick, rounds[0], progress, f"round {round_ + 1}")
             if alone is not None and not _earns(pick, alone):  # the first does not earn its place beside the second
-                untried = (trial[0], trial[4], [h.label for h in hyps if h.ok and h.stage == "full"], pick, alone)
-                current, data, accepted, small = trial[1], trial[2], accepted[:-1], small[:trial[3]]
+                untried = _Untried(trial.first, trial.lowers, [h.label for h in hyps if h.ok and h.stage == "full"], pick, alone)
+                current, data, accepted, small = trial.before, trial.data, accepted[:-1], small[:trial.small]
                 rounds.pop()
                 if _whole(current, alone, data):  # the second alone is the verdict
                     rounds[0][:] = [alone] + [h for h in rounds[0] if h.label != alone.label]
                     accepted.append(alone)
                     current, data = alone, through_element(data, alone)
                 break
-            pick.notes.append(f"Together with {trial[0].label}, which alone lowers {', '.join(trial[4])} (validation fit "
-                              f"{_fits(trial[4])}), it raises the fit without lowering any channel's"
+            pick.notes.append(f"Together with {trial.first.label}, which alone lowers {', '.join(trial.lowers)} (validation fit "
+                              f"{_fits(trial.lowers)}), it raises the fit without lowering any channel's"
                               + (f", and the pair passes the acceptance rule against {alone.label} alone." if alone is not None else "."))
             trial = None
         if pick is not None:  # the chosen explanation heads the ranking (simplest sufficient, then by gain)
@@ -249,10 +250,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             pick = _polished(current, pick, data_r, progress, f"round {round_ + 1}")  # a rival's looser refit, finished
             hyps.insert(0, pick)
         if lowers is not None:
-            trial = (pick, current, data, len(small), lowers)
+            trial = _Trial(pick, current, data, len(small), lowers)
         if pick is None and trial is not None:  # no second effect makes the pair on trial whole: neither is named
-            untried = (trial[0], trial[4], [h.label for h in hyps if h.ok and h.stage == "full"])
-            current, data, accepted, small = trial[1], trial[2], accepted[:-1], small[:trial[3]]
+            untried = _Untried(trial.first, trial.lowers, [h.label for h in hyps if h.ok and h.stage == "full"])
+            current, data, accepted, small = trial.before, trial.data, accepted[:-1], small[:trial.small]
             rounds.pop()  # measured against a model that is not kept
             break
         if pick is None:
@@ -320,17 +321,17 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         verdict["explanation"] += worsening_sentence(worse)
         verdict["worsened"] = [{"hypothesis": h.label, "channels": {ch: {"before": a, "after": b} for ch, (a, b) in h.worsens.items()}}
                                for h in worse]
-    if untried is not None and len(untried) == 3:
-        verdict["explanation"] += (f" {untried[0].label}, which lowers {', '.join(untried[1])}, was also fitted together with "
-                                   f"each candidate of a second round ({len(untried[2])} fitted in full): no pair raised the fit "
+    if untried is not None and untried.second is None:
+        verdict["explanation"] += (f" {untried.first.label}, which lowers {', '.join(untried.lowers)}, was also fitted together with "
+                                   f"each candidate of a second round ({len(untried.seconds)} fitted in full): no pair raised the fit "
                                    "without lowering a channel's.")
-        verdict["pair_tried"] = {"first": untried[0].label, "seconds": untried[2]}
+        verdict["pair_tried"] = {"first": untried.first.label, "seconds": untried.seconds}
     elif untried is not None:
-        verdict["explanation"] += (f" {untried[0].label}, which alone lowers {', '.join(untried[1])}, was also tried as the first of a "
-                                   f"pair with {untried[4].label}, but does not earn its place beside it (the pair against "
-                                   f"{untried[4].label} alone: BIC {untried[3].bic - untried[4].bic:+.1f}, validation residual "
-                                   f"{100 * (untried[3].validation_rss / untried[4].validation_rss - 1):+.1f} %).")
-        verdict["pair_tried"] = {"first": untried[0].label, "seconds": untried[2], "second": untried[4].label,
+        verdict["explanation"] += (f" {untried.first.label}, which alone lowers {', '.join(untried.lowers)}, was also tried as the first "
+                                   f"of a pair with {untried.second.label}, but does not earn its place beside it (the pair against "
+                                   f"{untried.second.label} alone: BIC {untried.pair.bic - untried.second.bic:+.1f}, validation residual "
+                                   f"{100 * (untried.pair.validation_rss / untried.second.validation_rss - 1):+.1f} %).")
+        verdict["pair_tried"] = {"first": untried.first.label, "seconds": untried.seconds, "second": untried.second.label,
                                  "second_named_alone": bool(accepted)}
     if small and accepted:  # (a correction that replaced the accepted effects makes them moot)
         from phs.workflows.diagnose.report import small_share_sentence
@@ -447,6 +448,30 @@ def _adds_share(nominal, current, h, data, noise) -> bool:
     return h.later_share >= LATER_SHARE
 
 
+class _Trial(NamedTuple):
+    """A first effect of a pair on trial (:func:`_traded`): the hypothesis, the model and data before it, how
+    many small-share hypotheses were set aside before it, and what it lowers alone (channel ->
+    validation fits before and after)."""
+
+    first: object
+    before: object
+    data: object
+    small: int
+    lowers: dict
+
+
+class _Untried(NamedTuple):
+    """What the verdict says of a pair on trial that was not named: the first and what it lowers, the second
+    round's hypotheses fitted in full, and, when a second made the pair whole but the first did not earn
+    its place beside it, the ``pair`` and the ``second`` fitted alone."""
+
+    first: object
+    lowers: dict
+    seconds: list
+    pair: object = None
+    second: object = None
+
+
 def _traded(current, hyps):
     """The hypothesis a pair is tried from when none is accepted: the best (largest validation gain) of those
     that pass the acceptance rule against ``current`` but lower another channel's validation fit
@@ -483,7 +508,7 @@ def _second_alone(trial, pick, first_round, progress, label):
         return None
     if same[0].stage == "full":
         return same[0]
-    h = _run_all(trial[1], [_for_refit(same[0])], trial[2], 1, progress, label + " the second alone")[0]
+    h = _run_all(trial.before, [_for_refit(same[0])], trial.data, 1, progress, label + " the second alone")[0]
     return h if h.ok else None
 
 
