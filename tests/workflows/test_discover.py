@@ -385,3 +385,22 @@ def test_a_library_effect_must_earn_its_place_next_to_the_correction():
     assert not _earns(with_library(better, 100.0 - MIN_BIC_GAIN + 1), alone)  # BIC not low enough
     assert not _earns(with_library(1 - MIN_VALIDATION_GAIN + 0.001, 100.0 - MIN_BIC_GAIN - 1), alone)  # residual
     assert not _earns(with_library(1.2, 90.0), alone)  # worse on validation
+
+
+def test_the_screen_in_worker_processes_ranks_as_in_one_process(softening):
+    """The dictionary's groups screened side by side (``n_jobs=2``, forked workers) give every term the same
+    first-order share and coefficient as the groups screened one after the other: the same integrations,
+    in other processes (equal to rounding)."""
+    from phs.workflows.diagnose.discover.selection import _groups, screen
+    from phs.workflows.diagnose.discover.selection import _scales as scales_of
+    from phs.workflows.diagnose.discover.selection import _trajectory
+
+    _, nominal, data, _, _ = softening
+    res, traj = _trajectory(nominal, data)
+    terms = dictionary(nominal.system, scales_of(nominal, data, res), traj, outputs=data.outputs)
+    assert len(_groups(terms)) >= 2  # more than one group, so that the workers have something to share
+    one = screen(nominal, [], terms, data, nominal.system, n_jobs=1)
+    two = screen(nominal, [], terms, data, nominal.system, n_jobs=2)
+    assert [t.label for t, _, _ in one] == [t.label for t, _, _ in two]
+    np.testing.assert_allclose([g for _, g, _ in two], [g for _, g, _ in one], rtol=1e-12, atol=0)
+    np.testing.assert_allclose([c for _, _, c in two], [c for _, _, c in one], rtol=1e-12, atol=0)
