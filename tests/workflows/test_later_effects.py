@@ -1,5 +1,5 @@
 """A second effect behind the first (``phs.workflows.diagnose.run``): a next round runs when the accepted effect
-leaves a residual above the noise or a coloured one, and names a later effect only when it adds at least
+leaves a residual above the noise or a coloured one (either alone), and names a later effect only when it adds at least
 ``LATER_SHARE`` of what the nominal model misses above the noise (``_adds_share``); one that would have been named
 without that rule is listed in ``verdict.small_share`` and in the explanation.
 
@@ -7,12 +7,14 @@ On a concealed pair (charge retention in the dielectric and Coulomb friction on 
 ``examples/concealed_effects.py``) the diagnosis names both; with the share raised between what the second adds
 and what the first leaves, the second is fitted but not named and the verdict says why, with the share it adds;
 raised above what the first leaves, no second round runs.  A leakage behind Coulomb friction, seen in the
-current alone (whose spikes at every voltage step must not be read as noise), is named too.
+current alone (whose spikes at every voltage step must not be read as noise), is named too.  A later effect
+that reaches no more than the accepted model refitted by itself (``screening.refit_alone``) is not named.
 """
 
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 
 import pytest
 
@@ -92,3 +94,34 @@ def test_a_second_effect_seen_in_the_current_alone_is_named():
     first, both = d.accepted[0].validation_fit_percent, d.final.validation_fit_percent
     assert both["current"] > first["current"] + 3.0  # measured 91.0 -> 96.7 %
     assert both["position"] > first["position"] - 0.05  # the position left where the first effect put it
+
+
+def test_a_round_opens_on_a_coloured_residual_alone(named, recordings, monkeypatch):
+    # the residual RMS test off (as when the first effect leaves less than 1.5 times the noise, on long
+    # recordings where a few per cent above the noise is significant): the round opens on the residual's
+    # colour, and the same second effect is named
+    monkeypatch.setattr(run, "_structured", lambda *a: False)
+    d2 = _diagnose(recordings)
+    assert d2.verdict["effects"] == named.verdict["effects"] and len(d2.rounds) == 2
+    assert d2.accepted[1].validation_rss == pytest.approx(named.accepted[1].validation_rss, rel=1e-6)
+
+
+def test_a_later_effect_is_judged_against_the_accepted_model_refitted_alone(named, recordings, monkeypatch):
+    # when the accepted model refitted by itself reaches what the second effect reaches, the second adds
+    # nothing beyond a better fit of the first (a flat valley the later refits move along): not named
+    second = named.accepted[1]
+    calls = []
+
+    def alone(current, data, joint=True):
+        calls.append(joint)
+        if not joint:
+            return None  # the screening's reference unchanged
+        # the accepted model with the second effect's scores, a training residual a little below the model's own
+        return replace(current, rss=0.999 * current.rss, validation_rss=second.validation_rss, bic=second.bic,
+                       validation_fit_percent=dict(second.validation_fit_percent),
+                       simulated={**current.simulated, "validation": second.simulated["validation"]})
+
+    monkeypatch.setattr(run, "refit_alone", alone)
+    d2 = _diagnose(recordings)
+    assert True in calls  # the judgement ran
+    assert d2.verdict["effects"] == [named.verdict["effects"][0]]

@@ -256,10 +256,59 @@ def _mismatch_extent(res: dict, rec, data, noise: dict | None, m0: int) -> int:
     return int(m0 + ok[0]) if ok.size else n
 
 
-def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, noise=None):
+def refit_alone(current, data, joint: bool = True):
+    """``current`` (a fitted model: the nominal one with accepted effects) refitted by itself, nothing added:
+    its free parameters ``data.free`` (and estimated states) from its own values, with a screening fit's
+    budget (``joint=False``: :data:`~phs.workflows.diagnose.hypotheses.SCREEN_ITER` evaluations at
+    :data:`~phs.workflows.diagnose.hypotheses.SCREEN_RTOL`) or a joint refit's (to
+    :data:`~phs.workflows.diagnose.hypotheses.REFIT_FTOL`), scored on ``data``; ``None`` when the fit fails.
+    What a hypothesis of a later round gains by moving the parameters it shares with ``current`` alone:
+    a fit that stopped where its integration no longer resolves the cost's decrease (a flat valley, as
+    when the library's law only approximates the truth's) moves on along the valley in any refit, with or
+    without a new element.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from codegen import simulate
+    >>> from systems.examples import rc_circuit
+    >>> from phs.workflows.recording import Recording
+    >>> from phs.workflows.diagnose.hypotheses import Data, score
+    >>> t = np.linspace(0, 0.02, 401); u = np.where((t % 0.01) > 0.005, 1.0, 0.0)
+    >>> rec = Recording.from_arrays(t, {"U": u, "v_C": simulate(rc_circuit(R=2e3), t, u={"U": u})["v_C"]})
+    >>> data = Data(rec, rec, np.ones(401, bool), None, ["v_C"], ["R.R"], {}, [], None)
+    >>> m = rc_circuit(R=1.5e3)
+    >>> h = refit_alone(score("start", m, {"R.R": 1.5e3}, [0.0], 1, data), data)
+    >>> round(h.values["R.R"]), h.rss < 1e-6
+    (2000, True)
+    """
+    from phs.workflows.diagnose.hypotheses import REFIT_FTOL, SCREEN_ITER, _default_log, _fit_rtol, _fixed, score
+    from phs.workflows.diagnose.retry import RECOVERABLE
+    from phs.workflows.identify import identify
+
+    free = [k for k in data.free if k in current.system.param_names]
+    if not free and not data.estimate_x0:
+        return None
+    log_scale = [k for k in (data.log_scale or []) if k in free] or _default_log(current.system, free)
+    try:
+        fit = identify(current.system.with_params(current.values), data.recording, free, bounds=data.bounds or None,
+                       x0=dict(zip(current.system.state_names, map(float, current.x0), strict=True)), outputs=data.outputs,
+                       log_scale=log_scale or None, rtol=_fit_rtol(data, joint), max_iter=30 if joint else SCREEN_ITER,
+                       ftol=REFIT_FTOL if joint else 1e-3, compile=None if joint else False, estimate_x0=data.estimate_x0,
+                       weights=_fixed(data.weights))
+        return score(current.label, current.system, fit.values, fit.x0, current.n_params, data,
+                     augmentation=current.augmentation, element_values=current.element_values, train_residuals=fit.residuals)
+    except RECOVERABLE:
+        return None
+
+
+def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, noise=None, worth=None):
     """Screen every hypothesis by a loose joint fit (few iterations, input elements by their search alone)
     on the leading part of the training recording (:func:`screening_samples`), scored on the whole
-    validation, then refit the ``refit_top`` most promising to convergence and score them on all of both."""
+    validation, then refit the ``refit_top`` most promising to convergence and score them on all of both.
+    ``worth(h, alone)`` (a later round): whether a screened hypothesis may be refitted, given ``alone``,
+    the model it extends refitted by itself with the same budget on the same samples (:func:`refit_alone`,
+    ``None`` when that fails); none is refitted when none is worth it."""
     if refit_top <= 0 or len(augs) <= refit_top:
         return _run_all(current, augs, data, n_jobs, progress, label)
     from phs.workflows.diagnose.hypotheses import score
@@ -280,8 +329,11 @@ def _screen_and_refit(current, augs, data, n_jobs, progress, label, refit_top, n
             short = data
     screened = _run_all(base, augs, short, n_jobs, progress, label + " screening", joint=False)
     screened.sort(key=lambda h: (not h.ok, -_gain(current, h)))
+    alone = refit_alone(base, short, joint=False) if worth is not None else None
     top, seen = [], set()
     for h in screened:  # the most promising distinct effects (one attachment each); beyond the best, only with a gain
+        if worth is not None and not (h.ok and worth(h, alone)):
+            continue
         if h.ok and h.augmentation.effect not in seen and len(top) < refit_top and (not top or _evidence(base, h)):
             top.append(h)
             seen.add(h.augmentation.effect)
