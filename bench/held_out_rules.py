@@ -21,8 +21,12 @@ value, by setting the module attribute it is read from (and every module that im
 Each configuration's diagnoses go to ``DIR/<configuration>.jsonl`` (default ``DIR``: ``held_out_rules``),
 one line per case, written atomically after each case; a case the file already holds is not run again (a
 stopped run resumes).  A row records the case, the verdict, its rightness, the reported confidence, the
-final model's validation fit per channel, the diagnosis' CPU and wall seconds, the 1-min load average as
-it started, the configuration's values and the ``phs`` package it ran (``source``).
+final model's validation fit per channel, the stages it reached beyond the library rounds (``reached``:
+``["discovery"]`` when a correction outside the library was looked for, as the accepted effects' rival
+too), the diagnosis' CPU and wall seconds, the 1-min load average as it started, the configuration's values
+and the ``phs`` package it ran (``source``).  A rule read only inside such a stage (:data:`REACH`: the
+discovery's dictionary, families and selection) is run only on the cases whose baseline row reached it:
+on the others the diagnosis never reads it, and every computation is the baseline's.
 
 Per configuration it prints one row of a markdown table: the cases run, the verdicts right (the named
 effect is the truth's; ``none`` for the control), the verdicts exact (the named effects are the truth's
@@ -102,9 +106,56 @@ RULES: dict = {
     "ELEMENT_ROUNDS": ((f"{D}.hypotheses",), (1, 16)),
     # noise surrogates per channel behind the located findings' thresholds
     "N_SURROGATES": ((f"{D}.locate._common", f"{D}.locate", f"{D}.locate.features"), (50, 200)),
+    # the decisions of every case: a located finding's significance (the surrogates' quantile)
+    "NULL_QUANTILE": ((f"{D}.locate._common", f"{D}.locate", f"{D}.locate.features"), (0.95, 0.999)),
+    # a residual RMS above this many noise levels is structure (beside the whiteness test): inf, the RMS
+    # test off (colour alone); 1.2, stricter
+    "STRUCTURED": ((f"{D}.mismatch",), (math.inf, 1.2)),
+    # a coloured residual counts only from this share of the channel's spread: 0, always; 0.05, coarser
+    "RELEVANT": ((f"{D}.run",), (0.0, 0.05)),
+    # two nominal starts agree within this share of the cost: a second start's work against a missed one
+    "AGREE": ((f"{D}.nominal",), (0.001, 0.1)),
+    # the plain least-squares check's values replace the nominal fit's when this share lower: 0, any
+    # decrease; inf, never (the check off)
+    "CHECK_MARGIN": ((f"{D}.nominal",), (0.0, math.inf)),
+    # the nominal fit's global step: points tried
+    "GLOBAL_SAMPLES": ((f"{D}.nominal",), (4, 16)),
+    # a reported refit's stopping point
+    "REFIT_FTOL": ((f"{D}.hypotheses",), (1e-5, 1e-7)),
+    # the ranking refits' stopping point
+    "RIVAL_FTOL": ((f"{D}.hypotheses",), (1e-3, 1e-6)),
+    # an input element's rounds stop below this relative decrease
+    "ELEMENT_TOL": ((f"{D}.hypotheses",), (1e-2, 1e-4)),
+    # an input element's bounded refinement: evaluations of a joint fit's, of a screening fit's
+    "REFINE_ITER": ((f"{D}.element_search", f"{D}.hypotheses"), (4, 16)),
+    "SCREEN_REFINE_ITER": ((f"{D}.element_search", f"{D}.hypotheses"), (2, 8)),
+    # a later round's first bracket around an element's earlier value (share of a grid step)
+    "LOCAL_SHARE": ((f"{D}.element_search",), (0.0625, 0.25)),
+    # moves tried beyond a round's end (grid steps)
+    "EXTRAPOLATE": ((f"{D}.element_search",), ((1.0,), (1.0, 2.0, 4.0, 8.0, 16.0))),
+    # discovery's constants (run only on the cases whose baseline diagnosis reached discovery: REACH)
+    "SCREEN_TOP": ((f"{D}.discover.selection",), (1, 5)),
+    "MAX_TERMS": ((f"{D}.discover.selection",), (1, 5)),
+    "NUDGE": ((f"{D}.discover.selection",), (0.005, 0.08)),
+    "THETA_MAX": ((f"{D}.discover.dictionary",), (10.0, 100.0)),
+    "WIDTH": ((f"{D}.discover.dictionary",), (0.02, 0.1)),
+    "ENGAGE_AT": ((f"{D}.discover.dictionary",), ((0.45,), (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8))),
+    "SENSITIVITY": ((f"{D}.discover.dictionary",), ((1e-4, 1e6, 0.1), (1e-4, 1e6, 10.0))),
+    "TAU_SPAN": ((f"{D}.discover.dictionary",), ((0.1, 20.0), (0.005, 500.0))),
+    "MODE_POINTS": ((f"{D}.discover.families",), (3, 9)),
+    "MODE_SPAN": ((f"{D}.discover.families",), (2.0, 8.0)),
+    "MODE_ZETA": ((f"{D}.discover.families",), ((0.005, 1.0, 0.2),)),
+    "DRIFT_TAU": ((f"{D}.discover.families",), ((0.05, 20.0, 1.0),)),
+    "LIMIT_START": ((f"{D}.discover.families",), (0.5, 2.0)),
+    "KNEE": ((f"{D}.discover.families", f"{D}.discover.emission"), (0.05,)),
 }
 """Per rule: the modules whose attribute of that name is set (where it is defined, and every module that
 imports it by name and reads it), and the values tried."""
+REACH = {rule: "discovery" for rule in ("SCREEN_TOP", "MAX_TERMS", "NUDGE", "THETA_MAX", "WIDTH", "ENGAGE_AT", "SENSITIVITY",
+                                         "TAU_SPAN", "MODE_POINTS", "MODE_SPAN", "MODE_ZETA", "DRIFT_TAU", "LIMIT_START", "KNEE")}
+"""Rules read only inside a stage that not every diagnosis reaches: their configurations run only on the
+cases whose baseline diagnosis reached it (``reached`` of its row), since on the others every computation,
+and so the verdict, is the baseline's."""
 LEFT = {("MIN_VALIDATION_GAIN", f"{D}.result"), ("MIN_VALIDATION_GAIN", f"{D}.report")}
 """Modules holding a rule's constant by name that are deliberately not set (see the module docstring)."""
 
@@ -189,15 +240,24 @@ def run_case(config: str, rule: str | None, value, effect: str, size: float, sec
 
     values = _set(rule, value)
     import phs
+    import phs.workflows.diagnose.discover as discovery
     from phs.workflows.diagnose import diagnose
     from systems.electrostatic_actuator import electrostatic_actuator
 
     train, _ = generate(effect, seconds=seconds, seed=seed, size=size)
     val, _ = generate(effect, seconds=seconds, seed=seed + 100, validation=True, size=size)
+    calls, found = [], discovery.discover  # which stages the diagnosis reached (REACH): counted, not changed
+
+    def counted(*a, **k):
+        calls.append(1)
+        return found(*a, **k)
+
+    discovery.discover = counted
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     c0, t0 = _cpu(), time.perf_counter()
     d = diagnose(electrostatic_actuator(), train, validation=val, free=list(NOMINAL_FREE), n_jobs=1)
     wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    discovery.discover = found
     fit = {k: round(float(v), 3) for k, v in d.final.validation_fit_percent.items()}
     v = d.verdict
     return {"config": config, "values": values, "effect": effect, "size": size, "seed": seed, "verdict": d.effect,
@@ -206,7 +266,8 @@ def run_case(config: str, rule: str | None, value, effect: str, size: float, sec
             "nominal_validation_fit": {k: round(float(x), 3) for k, x in d.nominal.validation_fit_percent.items()},
             "explained_share": round(float(v.get("explained_share", 0.0)), 4),
             "disagrees_with_located": v.get("disagrees_with_located", []), "rival_of": v.get("rival_of"),
-            "dropped": v.get("dropped", []), "cpu_seconds": round(cpu, 2), "seconds": round(wall, 2),
+            "dropped": v.get("dropped", []), "reached": ["discovery"] if calls else [], "cpu_seconds": round(cpu, 2),
+            "seconds": round(wall, 2),
             "load_before": None if load is None else round(load, 2), "source": os.path.dirname(os.path.realpath(phs.__file__))}
 
 
@@ -227,15 +288,32 @@ def _key(r: dict) -> tuple:
 
 def run(configs, todo, directory: str, seconds: float, seed: int, jobs: int) -> None:
     """Diagnose every case of ``todo`` under every configuration that does not hold it yet, ``jobs`` at a
-    time, each in a fresh process (``spawn``, one case per process), appending to the configuration's file."""
-    from phs.io import write_atomic
-
+    time, each in a fresh process (``spawn``, one case per process), appending to the configuration's file;
+    a rule of :data:`REACH` only on the cases whose baseline row reached its stage."""
     os.makedirs(directory, exist_ok=True)
     rows = {name: _load(_path(directory, name)) for name, _, _ in configs}
     tasks = []
     for name, rule, value in configs:  # the baseline first, then each configuration in turn
         done = {_key(r) for r in rows[name]}
-        tasks += [(name, rule, value, e, s) for e, s in todo if (e, float(s)) not in done]
+        tasks += [(name, rule, value, e, s) for e, s in todo if (e, float(s)) not in done and rule not in REACH]
+    if any(rule in REACH for _, rule, _ in configs):  # only where the baseline reached the rule's stage
+        _run_tasks(tasks, rows, directory, seconds, seed, jobs)  # the baseline's rows first: they say what was reached
+        tasks = []
+        base = {_key(r): r for r in rows["baseline"]}
+        if any("reached" not in base.get((e, float(s)), {}) for e, s in todo):
+            raise SystemExit(f"{_path(directory, 'baseline')}: its rows do not record the stages they reached (a run "
+                             "before that field): run the baseline again in another --dir")
+        for name, rule, value in configs:
+            if rule in REACH:
+                done = {_key(r) for r in rows[name]}
+                tasks += [(name, rule, value, e, s) for e, s in todo if (e, float(s)) not in done
+                          and REACH[rule] in base[(e, float(s))]["reached"]]
+    _run_tasks(tasks, rows, directory, seconds, seed, jobs)
+
+
+def _run_tasks(tasks, rows, directory, seconds, seed, jobs) -> None:
+    from phs.io import write_atomic
+
     if not tasks:
         return
     print(f"{len(tasks)} diagnoses to run ({jobs} at a time)", flush=True)

@@ -76,10 +76,19 @@ def _locate(scored, system, data, noise):
     return locate(data.recording.t, scored.residuals, feats, inputs, noise_std=noise)
 
 
+STRUCTURED = 1.5
+"""A residual whose RMS exceeds this many times the channel's noise level (:func:`noise_level`) is
+structure left, whatever its colour: one of the two tests (with the whiteness test of the located
+mismatch) that open a later round of the diagnosis, send it to discovery and keep a partial verdict's
+confidence scaled (``verdict.residual_above_noise``).  At 1.5 a residual holds at least 1.25 noise
+variances of unexplained signal; on 20 000 samples a second effect can leave less (a residual of 1.0-1.3
+times the noise), which the whiteness test catches instead."""
+
+
 def _structured(h, noise, outs) -> bool:
-    """Residual RMS above 1.5 times the noise in some channel."""
+    """Residual RMS above :data:`STRUCTURED` times the noise in some channel."""
     for ch in outs:
         r = h.residuals.get(ch)
-        if r is not None and noise.get(ch, 0) > 0 and float(np.sqrt(np.mean(r**2))) > 1.5 * noise[ch]:
+        if r is not None and noise.get(ch, 0) > 0 and float(np.sqrt(np.mean(r**2))) > STRUCTURED * noise[ch]:
             return True
     return False

@@ -78,9 +78,10 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     discover : bool, optional
         Look for a passive correction outside the library (:mod:`phs.workflows.diagnose.discover`):
         None (default) when the final model (the nominal one when no candidate was accepted) leaves a
-        structured residual (RMS above 1.5 times the noise in some channel) or a residual that is not
-        white (Ljung-Box p < 0.01 in some channel, RMS at least 1 % of its standard deviation) and, when
-        library effects were accepted, they explain less than :data:`DISCOVER_BELOW` of the mismatch;
+        structured residual (RMS above :data:`~phs.workflows.diagnose.mismatch.STRUCTURED` times the noise
+        in some channel) or a residual that is not white (Ljung-Box p < 0.01 in some channel, RMS at least
+        1 % of its standard deviation) and, when library effects were accepted, they explain less than
+        :data:`DISCOVER_BELOW` of the mismatch;
         True always; False never.
 
     Returns
