@@ -56,7 +56,7 @@ def test_an_element_setting_an_input_again_drops_its_old_course():
     rec, _ = generate("time_delay", seconds=1, seed=3, size=0.35)
     r = _transformed(rec, TimeDelay(), "U", [0.4 * rec.dt])
     assert "U" in r.between
-    s = _transformed(r, InputSaturation(), "U", [5.0, 5.0])
+    s = _transformed(r, InputSaturation(), "U", InputSaturation().at_limits(r.t, r["U"], 5.0, 5.0))
     assert "U" not in s.between and np.max(s["U"]) < np.max(r["U"])
     assert np.array_equal(s.input_signal("U")(s.t), s["U"])
 
@@ -69,11 +69,11 @@ def test_the_other_inputs_keep_their_holds_through_an_element():
     t = np.arange(11) * 0.1
     rec = Recording.from_arrays(t, {"U": np.linspace(0.0, 2.0, 11), "D": np.where(t < 0.45, 0.0, 1.0),
                                     "W": np.where(t < 0.45, 0.0, 1.0)}, holds={"D": "zoh", "W": "step(1.0, 0.5)"})
-    r = _transformed(rec, InputSaturation(), "U", [1.5, 1.5])
+    r = _transformed(rec, InputSaturation(), "U", InputSaturation().at_limits(rec.t, rec["U"], 1.5, 1.5))
     assert r.holds == {"D": "zoh", "W": rec.holds["W"]}
     assert float(r.input_signal("D")(0.45)) == 0.0 and float(rec.input_signal("D")(0.45)) == 0.0
     assert float(r.input_signal("W")(0.45)) == 0.0 and float(r.input_signal("W")(0.55)) == 1.0
     held = Recording.from_arrays(t, {"U": np.where(t < 0.45, 0.0, 2.0)}, holds={"U": "zoh"})
-    assert _transformed(held, InputSaturation(), "U", [1.5, 1.5]).holds == {"U": "zoh"}
+    assert _transformed(held, InputSaturation(), "U", InputSaturation().at_limits(t, held["U"], 1.5)).holds == {"U": "zoh"}
     law = Recording.from_arrays(t, {"U": np.where(t < 0.45, 0.0, 2.0)}, holds={"U": "step(2.0, 0.5)"})
-    assert _transformed(law, InputSaturation(), "U", [1.5, 1.5]).holds == {}
+    assert _transformed(law, InputSaturation(), "U", InputSaturation().at_limits(t, law["U"], 1.5)).holds == {}

@@ -155,11 +155,14 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
     grid from such a point on when the cost still falls there (no valley inside: the minimum lies that
     way; that point itself when it is the grid's end), the whole grid when ``theta`` lies outside it.
     ``resolution``: the least decrease of the cost a parabolic step of the local search must promise to be
-    taken (a smaller one moves the parameter within what the data resolve)."""
+    taken (a smaller one moves the parameter within what the data resolve).  A parameter whose range is a
+    single point is not searched: it stays where ``theta`` holds it."""
     import scipy.optimize
 
     theta = [float(v) for v in theta]
     for k, (_name, _start, lo, hi) in enumerate(specs):
+        if not hi > lo:  # a parameter whose range is one point is held there (a reference level, an unused side)
+            continue
         grid = np.geomspace(max(lo, 1e-3 * hi), hi, 9) if lo >= 0 else np.linspace(lo, hi, 9)
         if lo == 0:
             grid = np.concatenate([[0.0], grid])
@@ -210,6 +213,19 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
         if best[1] <= f1(theta[k]):
             theta[k] = best[0]
     return theta
+
+
+def searched(specs) -> int:
+    """How many of an input element's parameters ``(name, start, lo, hi)`` are searched: those whose range
+    is more than a point (:func:`element_search` holds the others); what a hypothesis' parameter count
+    takes from its element.
+
+    Examples
+    --------
+    >>> searched([("c", 0.0, 0.0, 0.8), ("ref", 2.0, 2.0, 2.0)])
+    1
+    """
+    return sum(1 for _name, _start, lo, hi in specs if hi > lo)
 
 
 PRESSED = 1e-6

@@ -11,7 +11,8 @@ import numpy as np
 
 from codegen import Simulator
 from phs.errors import PHSError
-from phs.workflows.diagnose.element_search import PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, element_search, extrapolate  # noqa: F401
+from phs.workflows.diagnose.element_search import (  # noqa: F401
+    PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, element_search, extrapolate, searched)
 from phs.workflows.diagnose.scoring import _channel_rss, _floors, bic, weight_squared  # noqa: F401  (bic re-exported)
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
@@ -431,7 +432,7 @@ def neutral_point(nominal: Scored, aug, data: Data) -> Scored:
         if theta is not None:
             specs = aug.element.parameters(data.recording.t, command(data.recording, aug.attached_to))
             h.element_values = {f"{aug.element.effect}.{sp[0]}": float(v) for sp, v in zip(specs, theta, strict=True)}
-            h.n_params = len(data.free) + len(specs)
+            h.n_params = len(data.free) + searched(specs)
         h.bic = nominal.bic + (h.n_params - nominal.n_params) * math.log(max(len(data.recording) * len(data.outputs), 1))
         return h
     values = {**{k: v for k, v in nominal.values.items() if k in aug.system.param_names}, **aug.neutral}
@@ -576,7 +577,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         theta, values, x0, c = whole[0], whole[1], whole[2], whole[4]
         recovery = " ".join(r for r in (recovery, whole[3]) if r)
     ev = {f"{el.effect}.{s[0]}": float(v) for s, v in zip(specs, theta, strict=True)}
-    h = score(f"{aug.effect}@{where}", base, values, x0, len(data.free) + len(specs), data,
+    h = score(f"{aug.effect}@{where}", base, values, x0, len(data.free) + searched(specs), data,
               augmentation=aug, element=el, where=where, theta=theta, element_values=ev, seconds=time.perf_counter() - t0)
     h.recovery = recovery
     return _never_worse(nominal, h, aug, data, t0)
