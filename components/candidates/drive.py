@@ -108,6 +108,16 @@ class InputSaturation(InputElement):
 
         return level(c_hi, ref_hi), level(c_lo, ref_lo)
 
+    def derived(self, theta) -> dict:
+        """The limits ``U_hi`` and ``U_lo`` (:meth:`limits`) a saturation with parameters ``theta`` tends to.
+
+        Examples
+        --------
+        >>> {k: round(v, 6) for k, v in InputSaturation().derived([0.1, 0.0, 20.0, 10.0, 1.0]).items()}
+        {'U_hi': 9.058521, 'U_lo': inf}
+        """
+        return dict(zip(("U_hi", "U_lo"), self.limits(theta), strict=True))
+
     def at_limits(self, t, u, U_hi: float, U_lo: float = math.inf, p: float = 20.0) -> list[float]:
         """The parameters (:meth:`parameters`' order) of the saturation that tends to ``U_hi`` above and
         ``-U_lo`` below with sharpness ``p``, on the command ``u`` (inverse of :meth:`limits`).

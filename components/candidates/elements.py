@@ -237,6 +237,11 @@ class InputElement(Candidate):
         input through unchanged, or None when unknown."""
         return None
 
+    def derived(self, theta) -> dict:
+        """Readable quantities of the parameters ``theta`` that the report shows beside them (a saturation's
+        limits beside its compression of the peak); none by default."""
+        return {}
+
     def course(self, t, u, theta) -> tuple | None:
         """The element's output in continuous time as ``(times, values)`` (linear between them) when it is
         not the straight line through its values at the samples (:meth:`transform`), else None: a delay by
@@ -283,6 +288,9 @@ class InLoop(InputElement):
 
     def transform(self, t, u, theta) -> np.ndarray:
         return self.inner.transform(t, u, theta)
+
+    def derived(self, theta) -> dict:
+        return self.inner.derived(theta)
 
     def neutral(self, t, u) -> list | None:
         return self.inner.neutral(t, u)

@@ -110,4 +110,7 @@ def test_a_gradual_saturation_is_explained_by_the_law_not_by_a_hard_clip(size):
         shares[name] = d.verdict["explained_share"]
         if name == "law":
             assert d.accepted[0].element_values["input_saturation.p"] < 5.0, d.accepted[0].element_values  # found gradual
+            # the report gives the limit it tends to beside the compression (the truth tanh: 39.5 V, 1.6 times the peak)
+            limit = InputSaturation().derived(list(d.accepted[0].element_values.values()))["U_hi"]
+            assert f"U_hi = {limit:.3g}" in d.verdict["explanation"] and 1.2 < limit / np.max(train["U"]) < 4, d.verdict
     assert shares["law"] > 0.75 and shares["hard"] < 0.5, shares

@@ -228,6 +228,29 @@ def searched(specs) -> int:
     return sum(1 for _name, _start, lo, hi in specs if hi > lo)
 
 
+def input_key(rec, transformed) -> tuple:
+    """What an input element changed in a recording (``transformed`` from ``rec``), as a hashable key: the
+    bytes of every signal and course between samples that is not ``rec``'s own object.  Two trials with
+    the same key drive the model alike, so one simulation serves both.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> u = np.zeros(3)
+    >>> rec = NS(signals={"U": u, "y": u}, between={})
+    >>> a, b = NS(signals={"U": np.ones(3), "y": u}, between={}), NS(signals={"U": np.ones(3), "y": u}, between={})
+    >>> input_key(rec, a) == input_key(rec, b) != input_key(rec, rec)
+    True
+    """
+    def digest(v) -> bytes:
+        arrays = v if isinstance(v, tuple) else (v,)
+        return b"".join(np.ascontiguousarray(a, dtype=float).tobytes() for a in arrays)
+
+    changed = [(k, digest(v)) for k, v in transformed.signals.items() if v is not rec.signals.get(k)]
+    between = [(k, digest(v)) for k, v in transformed.between.items() if v is not rec.between.get(k)]
+    return tuple(sorted(changed)), tuple(sorted(between))
+
+
 PRESSED = 1e-6
 """A fitted value within this share of its range's width (of its logarithm's, for a positive range spanning
 decades) of an end lies on that bound (:func:`_pressed`).  A numerical margin, not a measurement."""

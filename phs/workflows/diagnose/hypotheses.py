@@ -12,7 +12,7 @@ import numpy as np
 from codegen import Simulator
 from phs.errors import PHSError
 from phs.workflows.diagnose.element_search import (  # noqa: F401
-    PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, element_search, extrapolate, searched)
+    PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, element_search, extrapolate, input_key, searched)
 from phs.workflows.diagnose.scoring import _channel_rss, _floors, bic, weight_squared  # noqa: F401  (bic re-exported)
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
@@ -486,16 +486,21 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         sim = Simulator(system, rtol=rtol, energy=False)
         seen: dict = {}
 
-        def cost(theta, values=None):  # one simulation per distinct trial (the neutral point is often on the grid)
-            params = {k: float(values[k]) for k in data.free} if values is not None else None
-            key = tuple(float(v) for v in theta) + tuple(sorted((params or {}).items()))
+        def cost(theta, values=None):  # one simulation per distinct input the model receives (per distinct trial
+            # first: the neutral point is often on the grid; then per input: parameters that do not act, as a
+            # saturation's sharpness while it compresses nothing, give the input of a trial already run)
+            params = tuple(sorted({k: float(values[k]) for k in data.free}.items())) if values is not None else ()
+            key = tuple(float(v) for v in theta) + params
             if key not in seen:
                 r = _transformed(rec, el, where, theta)
-                try:
-                    s = _simulate(system, r, x0, params=params, sim=sim)
-                    seen[key] = sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
-                except (PHSError, RuntimeError):
-                    seen[key] = math.inf
+                same = (input_key(rec, r), params)
+                if same not in seen:
+                    try:
+                        s = _simulate(system, r, x0, params=dict(params) if values is not None else None, sim=sim)
+                        seen[same] = sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
+                    except (PHSError, RuntimeError):
+                        seen[same] = math.inf
+                seen[key] = seen[same]
             return seen[key]
 
         return cost

@@ -78,7 +78,8 @@ def explanation(nominal, accepted, findings, rival, outs) -> str:
         what = aug.summary or summaries.get(aug.effect, aug.component or aug.effect)
         ev = [f for f in findings if f.kind in _EVIDENCE.get(aug.effect, ())][:2]
         where = "; ".join(f"{f.channel}: {f.where}" for f in ev)
-        params = _fmt_params({**{p: h.values[p] for p in aug.free if p in h.values}, **h.element_values})
+        derived = aug.element.derived(list(h.element_values.values())) if aug.element is not None and h.element_values else {}
+        params = _fmt_params({**{p: h.values[p] for p in aug.free if p in h.values}, **h.element_values, **derived})
         lead = "Missing physics" if k == 0 else "A second effect"
         out.append(f"{lead}: {what} — {aug.effect} at {aug.attached_to} ({aug.component}; {params})."
                    + (f" It showed as {where}." if where else "")
