@@ -5,6 +5,7 @@ through its values at the samples (``InputElement.course``, ``Recording.between`
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from components.candidates import InputSaturation, TimeDelay
 from examples.concealed_effects import generate
@@ -50,16 +51,32 @@ def test_a_window_keeps_the_course_over_it():
     assert w.between["U"][0][0] <= 0.2 and w.between["U"][0][-1] >= 0.6
 
 
-def test_an_element_setting_an_input_again_drops_its_old_course():
-    # a second element at the same input (a later diagnosis round) sets new samples: the course of the first
-    # no longer describes them
+def test_an_element_setting_an_input_again_transforms_its_course():
+    # a second element at the same input (a later diagnosis round) transforms the course the first left: a
+    # saturation after a delay by a fraction of a sample saturates the delayed course (along the line through
+    # its new samples the delay's kinks between the samples were lost: on the concealed input saturation +
+    # time delay pair, the saturation's every trial then cost three times the model without it)
     rec, _ = generate("time_delay", seconds=1, seed=3, size=0.35)
     r = _transformed(rec, TimeDelay(), "U", [0.4 * rec.dt])
-    assert "U" in r.between
-    s = _transformed(r, InputSaturation(), "U", InputSaturation().at_limits(r.t, r["U"], 5.0, 5.0))
-    assert "U" not in s.between and np.max(s["U"]) < np.max(r["U"])
-    assert np.array_equal(s.input_signal("U")(s.t), s["U"])
+    times, values = r.between["U"]
+    sat = InputSaturation()
+    theta = sat.at_limits(r.t, r["U"], 5.0, 5.0)
+    s = _transformed(r, sat, "U", theta)
+    assert np.array_equal(s.between["U"][0], times)
+    assert np.array_equal(s.input_signal("U")(times), sat.transform(times, values, theta))
+    assert np.max(s["U"]) < np.max(r["U"]) and np.max(s.between["U"][1]) < np.max(values)
 
+
+@pytest.mark.parametrize("a, b", [(0.4, 0.3), (0.25, 1.5), (2.0, 0.0)])
+def test_two_delays_at_one_input_make_their_sum(a, b):
+    # the course of a delay after a delay is the course of the summed delay (independent computations:
+    # composed through the recording, and at once), between the samples too
+    rec, _ = generate("time_delay", seconds=0.5, seed=3, size=0.35)
+    dt = rec.dt
+    twice = _transformed(_transformed(rec, TimeDelay(), "U", [a * dt]), TimeDelay(), "U", [b * dt])
+    once = _transformed(rec, TimeDelay(), "U", [(a + b) * dt])
+    tt = np.linspace(rec.t[0], rec.t[-1], 7 * len(rec.t) + 3)
+    assert np.allclose(twice.input_signal("U")(tt), once.input_signal("U")(tt), rtol=0, atol=1e-12 * np.ptp(rec["U"]))
 
 
 def test_the_other_inputs_keep_their_holds_through_an_element():

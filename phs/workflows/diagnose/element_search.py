@@ -15,8 +15,14 @@ Examples
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
+
+from codegen import Simulator
+from phs.errors import PHSError
+from phs.workflows.diagnose.scoring import weight_squared
+from phs.workflows.recording import Recording
 
 EXTRAPOLATE = (1.0, 2.0, 4.0, 8.0)
 """Multiples of a round's move tried beyond its end (:func:`extrapolate`).  Not chosen on a measurement."""
@@ -156,7 +162,27 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
     way; that point itself when it is the grid's end), the whole grid when ``theta`` lies outside it.
     ``resolution``: the least decrease of the cost a parabolic step of the local search must promise to be
     taken (a smaller one moves the parameter within what the data resolve).  A parameter whose range is a
-    single point is not searched: it stays where ``theta`` holds it."""
+    single point is not searched: it stays where ``theta`` holds it.  A search over the grids of more than
+    one parameter sweeps them again, locally, while a sweep moves one (:data:`SWEEPS`)."""
+    theta = _sweep(cost, specs, theta, local, refine_iter, resolution)
+    for _ in range(SWEEPS - 1 if not local and searched(specs) > 1 else 0):  # parameters that set each other's optimum
+        before = list(theta)
+        theta = _sweep(cost, specs, theta, True, refine_iter, resolution)
+        if theta == before:
+            break
+    return theta
+
+
+SWEEPS = 3
+"""Most sweeps over an element's parameters in a search over their grids (:func:`element_search`): the grid
+sweep, then local sweeps while one moves a parameter.  One parameter's optimum may depend on another's
+value: a saturation's compression does not pay at the hard clip its sharpness starts at when the truth
+compresses gradually, and the sharpness, searched at no compression, moves to the gradual end where the
+compression then pays.  Not chosen on a measurement."""
+
+
+def _sweep(cost, specs, theta, local, refine_iter, resolution) -> list[float]:
+    """One sweep of :func:`element_search` over the parameters in turn."""
     import scipy.optimize
 
     theta = [float(v) for v in theta]
@@ -213,6 +239,204 @@ def element_search(cost, specs, theta, local: bool = False, refine_iter: int = R
         if best[1] <= f1(theta[k]):
             theta[k] = best[0]
     return theta
+
+
+def _transformed(rec: Recording, element, where: str, theta) -> Recording:
+    """``rec`` with the model inputs the input element (parameters ``theta``) sets at its place
+    (:meth:`~components.candidates.elements.InputElement.drive`): the transformed command of every input
+    of the place (one input, or several driven together), or, between a controller and the plant, the
+    element's deviation from the recorded command; with its course between the samples where the element
+    gives one (:meth:`~components.candidates.elements.InputElement.course`: a delay by a fraction of a
+    sample), which every simulation then reads (:attr:`~phs.workflows.recording.Recording.between`)."""
+    if element is None:
+        return rec
+    sig = dict(rec.signals)
+    driven = element.drive(rec.t, sig, where, theta)
+    # an input the element sets follows its new course, or the line through its new samples; one that followed a
+    # course already (an element accepted before: a delay by a fraction of a sample) is transformed along that
+    # course (the line through its new samples would drop the kinks between the samples: on a stepping command,
+    # most of a capacitive load's current)
+    between = {k: v for k, v in rec.between.items() if k not in driven}
+    for k in driven:
+        if k in rec.between:
+            times, values = rec.between[k]
+            between[k] = element.course(times, values, theta) or (times, element.transform(times, values, theta))
+    between.update({k: v for k, v in element.drive_between(rec.t, sig, where, theta).items() if k not in rec.between})
+    sig.update(driven)
+    # the other inputs keep how they behave between samples (a disturbance held by a DAC stays held); an input the
+    # element sets keeps a declared hold ("zoh": the element maps held samples to held samples) but not a declared
+    # law, which its new samples no longer follow
+    holds = {k: h for k, h in rec.holds.items() if k not in driven or isinstance(h, str)}
+    return replace(rec, signals=sig, between=between, holds=holds)
+
+
+def _simulate(system, rec: Recording, x0, params=None, sim=None):
+    u = {n: rec.input_signal(n) for n in system.input_names}
+    sim = sim or Simulator(system, energy=False)
+    return sim.run(rec.t, u=u, x0=x0, params=params)
+
+
+def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: float, profile=None):
+    """The training cost of an input element's trials on ``rec`` with ``system`` (its parameters fixed, or
+    set per call): ``cost(theta, values=None)``, the weighted residual sum of squares
+    ``Σ_ch w_ch² Σ (y_ch − ŷ_ch)²`` (the weights of ``data``'s training recording, ``rec`` its window or
+    itself) of the model driven through the element at ``theta`` (infinite when the
+    simulation fails).  One simulation per distinct input the model receives: the neutral point is often
+    on the grid, and parameters that do not act (a saturation's sharpness while it compresses nothing)
+    give the input of a trial already run (:func:`input_key`).
+
+    With a ``profile`` (:func:`nominal_profile`), the cost is the one left after the model's free
+    parameters re-adjust to first order (:meth:`Profile.left`), and ``cost.step(theta)`` gives that
+    re-adjustment.
+
+    Examples
+    --------
+    >>> from components.candidates import TimeDelay
+    >>> from systems.examples import rc_circuit
+    >>> from phs.workflows.diagnose.hypotheses import Data
+    >>> t = np.linspace(0, 0.02, 401); u = np.where(t > 0.005, 1.0, 0.0)
+    >>> late = Recording.from_arrays(t, {"U": np.where(t > 0.006, 1.0, 0.0), "v_C": np.zeros(401)})
+    >>> late = replace(late, signals={**late.signals, "v_C": _simulate(rc_circuit(), late, [0.0])["v_C"]})
+    >>> rec = replace(late, signals={**late.signals, "U": u})
+    >>> data = Data(rec, rec, np.ones(401, bool), None, ["v_C"], [], {}, [], None)
+    >>> cost = trial_cost(rc_circuit(), [0.0], rec, TimeDelay(), "U", data, 1e-8)
+    >>> cost([0.001]) < 1e-8 < cost([0.0])
+    True
+    """
+    sim = Simulator(system, rtol=rtol, energy=False)
+    outs = list(data.outputs)
+    w = {ch: math.sqrt(weight_squared(data.weights, ch, data.recording[ch])) for ch in outs}  # the whole training recording's
+    seen: dict = {}
+
+    def evaluate(theta, values=None):
+        params = tuple(sorted({k: float(values[k]) for k in data.free}.items())) if values is not None else ()
+        key = tuple(float(v) for v in theta) + params
+        if key not in seen:
+            r = _transformed(rec, element, where, theta)
+            same = (input_key(rec, r), params)
+            if same not in seen:
+                try:
+                    s = _simulate(system, r, x0, params=dict(params) if values is not None else None, sim=sim)
+                    res = np.concatenate([(np.asarray(r[ch], float) - np.asarray(s[ch], float)) * w[ch] for ch in outs])
+                    c = float(res @ res)
+                    seen[same] = (c, profile.coefficients(res) if profile is not None else None) if math.isfinite(c) else (math.inf, None)
+                except (PHSError, RuntimeError):
+                    seen[same] = (math.inf, None)
+            seen[key] = seen[same]
+        return seen[key]
+
+    def cost(theta, values=None):
+        c, a = evaluate(theta, values)
+        return c if a is None else profile.left(c, a)
+
+    cost.step = lambda theta: profile.step(evaluate(theta)[1]) if profile is not None and evaluate(theta)[1] is not None else {}
+    return cost
+
+
+PROFILE_STEP = 1e-3
+"""Relative step of the finite differences that give the free parameters' first-order directions
+(:func:`nominal_profile`; an absolute ``1e-3`` for a parameter at zero).  Large beside the integration's
+tolerance (at most ``1e-6`` relative, so a direction is resolved to about ``1e-3``), small beside the moves the
+profile stands for.  Not chosen on a measurement."""
+PROFILE_RCOND = 1e-6
+"""Directions whose singular value is below this share of the largest are left out of the profile (free
+parameters that act alike on the recording).  A numerical margin, not a measurement."""
+PROFILE_TRUST = 0.5
+"""Largest relative change of a free parameter in the step :meth:`Profile.step` proposes (the whole step
+scaled down to it): the first-order model holds near where it was made.  Not chosen on a measurement."""
+
+
+class Profile:
+    """The free parameters' first-order directions on a recording: ``D`` (columns ``r(p + h_k e_k) − r(p)``,
+    weighted and stacked over the channels, for the steps ``h``), factored once.  :meth:`left` is the cost
+    of a residual after the best re-adjustment along them (``‖r‖² − ‖Uᵀ r‖²``, with ``U`` the left singular
+    vectors kept), :meth:`step` the re-adjustment of the parameters itself (``−D⁺ r``, scaled to
+    :data:`PROFILE_TRUST`, within ``bounds``).
+
+    Examples
+    --------
+    >>> D = np.array([[1.0], [1.0], [0.0]])
+    >>> pr = Profile(D, {"k": 2.0}, {"k": 0.1}, {"k": (0.0, 10.0)})
+    >>> r = np.array([0.3, 0.3, 0.4])
+    >>> round(pr.left(float(r @ r), pr.coefficients(r)), 12), round(pr.step(pr.coefficients(r))["k"], 12)
+    (0.16, 1.97)
+    """
+
+    def __init__(self, D: np.ndarray, values: dict, steps: dict, bounds: dict):
+        U, s, Vt = np.linalg.svd(D, full_matrices=False)
+        keep = s > PROFILE_RCOND * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
+        self.U = U[:, keep]
+        self.map = Vt[keep].T / s[keep]  # D⁺ = V Σ⁻¹ Uᵀ: coefficients Uᵀ r to steps in units of h
+        self.values, self.steps, self.bounds = dict(values), dict(steps), dict(bounds)
+
+    def coefficients(self, r: np.ndarray) -> np.ndarray:
+        return self.U.T @ r
+
+    def left(self, c: float, a: np.ndarray) -> float:
+        return max(c - float(a @ a), 0.0)
+
+    def step(self, a: np.ndarray) -> dict:
+        names = list(self.steps)
+        delta = -(self.map @ a) * np.array([self.steps[k] for k in names])
+        rel = max((abs(d) / abs(self.values[k]) for k, d in zip(names, delta, strict=True) if self.values[k] != 0), default=0.0)
+        if rel > PROFILE_TRUST:
+            delta = delta * (PROFILE_TRUST / rel)
+        out = {}
+        for k, d in zip(names, delta, strict=True):
+            lo, hi = self.bounds.get(k, (-math.inf, math.inf))
+            out[k] = float(min(max(self.values[k] + d, lo), hi))
+        return out
+
+
+def nominal_profile(system, x0, rec: Recording, data, values: dict, bounds: dict, rtol: float) -> Profile | None:
+    """The first-order directions of the free parameters ``data.free`` of ``system`` at ``values`` on
+    ``rec`` (the recording as the model receives it: an input element at its neutral point), by forward
+    differences (:data:`PROFILE_STEP`, away from a bound of ``bounds``): one simulation per parameter.
+    ``None`` without free parameters or when the simulation at ``values`` fails; a parameter whose
+    stepped simulation fails is left out.
+
+    An input element's parameters are searched with the model's fixed (one simulation per trial); a
+    nominal parameter may have absorbed part of the effect (a gain the compression of a saturation), so
+    that the element alone, the model held, lowers nothing.  Searched on the cost left after the model's
+    first-order re-adjustment (:class:`Profile`), the element is ranked on what it adds once the model
+    re-adjusts, as a jointly fitted candidate is.
+    """
+    free = [k for k in data.free if k in values]
+    if not free:
+        return None
+    sim = Simulator(system, rtol=rtol, energy=False)
+    outs = list(data.outputs)
+    w = {ch: math.sqrt(weight_squared(data.weights, ch, data.recording[ch])) for ch in outs}  # the whole training recording's
+
+    def residual(vals):
+        s = _simulate(system, rec, x0, params=vals, sim=sim)
+        r = np.concatenate([(np.asarray(rec[ch], float) - np.asarray(s[ch], float)) * w[ch] for ch in outs])
+        return r if np.all(np.isfinite(r)) else None
+
+    base_vals = {k: float(values[k]) for k in free}
+    try:
+        base = residual(base_vals)
+    except (PHSError, RuntimeError):
+        return None
+    if base is None:
+        return None
+    cols, steps, used = [], {}, {}
+    for k in free:
+        v = base_vals[k]
+        lo, hi = bounds.get(k, (-math.inf, math.inf))
+        h = PROFILE_STEP * (abs(v) if v != 0 else 1.0)
+        if v + h > hi:
+            h = -h
+        try:
+            r = residual({**base_vals, k: v + h})
+        except (PHSError, RuntimeError):
+            r = None
+        if r is not None:
+            cols.append(r - base)
+            steps[k], used[k] = h, v
+    if not cols:
+        return None
+    return Profile(np.column_stack(cols), used, steps, {k: tuple(bounds.get(k, (-math.inf, math.inf))) for k in used})
 
 
 def searched(specs) -> int:

@@ -11,8 +11,9 @@ import numpy as np
 
 from codegen import Simulator
 from phs.errors import PHSError
-from phs.workflows.diagnose.element_search import (  # noqa: F401
-    PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, element_search, extrapolate, input_key, searched)
+from phs.workflows.diagnose.element_search import (  # noqa: F401  (_transformed, _simulate re-exported)
+    PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, _simulate, _transformed, element_search, extrapolate, input_key,
+    nominal_profile, searched, trial_cost)
 from phs.workflows.diagnose.scoring import _channel_rss, _floors, bic, weight_squared  # noqa: F401  (bic re-exported)
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
@@ -155,29 +156,6 @@ class Data:
         return out
 
 
-def _transformed(rec: Recording, element, where: str, theta) -> Recording:
-    """``rec`` with the model inputs the input element (parameters ``theta``) sets at its place
-    (:meth:`~components.candidates.elements.InputElement.drive`): the transformed command of every input
-    of the place (one input, or several driven together), or, between a controller and the plant, the
-    element's deviation from the recorded command; with its course between the samples where the element
-    gives one (:meth:`~components.candidates.elements.InputElement.course`: a delay by a fraction of a
-    sample), which every simulation then reads (:attr:`~phs.workflows.recording.Recording.between`)."""
-    if element is None:
-        return rec
-    sig = dict(rec.signals)
-    driven = element.drive(rec.t, sig, where, theta)
-    # an input the element sets follows its new course, or the line through its new samples (a course the
-    # recording had, from an element accepted before, no longer holds)
-    between = {k: v for k, v in rec.between.items() if k not in driven}
-    between.update(element.drive_between(rec.t, sig, where, theta))
-    sig.update(driven)
-    # the other inputs keep how they behave between samples (a disturbance held by a DAC stays held); an input the
-    # element sets keeps a declared hold ("zoh": the element maps held samples to held samples) but not a declared
-    # law, which its new samples no longer follow
-    holds = {k: h for k, h in rec.holds.items() if k not in driven or isinstance(h, str)}
-    return replace(rec, signals=sig, between=between, holds=holds)
-
-
 def _element_key(aug) -> str:
     return f"{aug.effect}@{aug.attached_to}"
 
@@ -232,12 +210,6 @@ def command(rec: Recording, where: str) -> np.ndarray:
     from components.candidates.elements import input_members
 
     return np.asarray(rec[input_members(where)[0]], float)
-
-
-def _simulate(system, rec: Recording, x0, params=None, sim=None):
-    u = {n: rec.input_signal(n) for n in system.input_names}
-    sim = sim or Simulator(system, energy=False)
-    return sim.run(rec.t, u=u, x0=x0, params=params)
 
 
 def score(label, system, values, x0, n_params, data: Data, *, augmentation=None, element=None, where="", theta=(),
@@ -482,43 +454,33 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     rtol = _fit_rtol(data, joint)
     from phs.workflows.diagnose.retry import RECOVERABLE, reason
 
-    def cost_of(system, x0, rec=rec):
-        sim = Simulator(system, rtol=rtol, energy=False)
-        seen: dict = {}
+    def cost_of(system, x0, rec=rec, profile=None):
+        return trial_cost(system, x0, rec, el, where, data, rtol, profile)
 
-        def cost(theta, values=None):  # one simulation per distinct input the model receives (per distinct trial
-            # first: the neutral point is often on the grid; then per input: parameters that do not act, as a
-            # saturation's sharpness while it compresses nothing, give the input of a trial already run)
-            params = tuple(sorted({k: float(values[k]) for k in data.free}.items())) if values is not None else ()
-            key = tuple(float(v) for v in theta) + params
-            if key not in seen:
-                r = _transformed(rec, el, where, theta)
-                same = (input_key(rec, r), params)
-                if same not in seen:
-                    try:
-                        s = _simulate(system, r, x0, params=dict(params) if values is not None else None, sim=sim)
-                        seen[same] = sum(float(np.sum((np.asarray(r[ch]) - s[ch]) ** 2)) * w2[ch] for ch in outs)
-                    except (PHSError, RuntimeError):
-                        seen[same] = math.inf
-                seen[key] = seen[same]
-            return seen[key]
-
-        return cost
-
-    def alternate(first, values, x0, neutral, rec=rec):
+    def alternate(first, values, x0, neutral, rec=rec, profiled=False):
         """One fit of an input element on the training recording ``rec`` (the whole, or a leading window of it)
         from the model values ``values``: the element's search (around ``first``, or over its whole grid),
         never ending above ``neutral`` (the element's neutral point, when given), then alternating refits of
-        the model through it (:data:`ELEMENT_ROUNDS`, one when screening).  Returns ``(theta, values, x0,
-        recovery, training cost)``."""
+        the model through it (:data:`ELEMENT_ROUNDS`, one when screening).  ``profiled``: the first search
+        on the cost left after the model's first-order re-adjustment (:func:`nominal_profile`), the refit
+        from that re-adjustment when it lowers the cost.  Returns ``(theta, values, x0, recovery, training cost)``."""
         cost = cost_of(base.with_params(values), x0, rec)
+        search = cost
+        if profiled and data.free:
+            neutral_rec = _transformed(rec, el, where, neutral if neutral is not None else [s[1] for s in specs])
+            prof = nominal_profile(base.with_params(values), x0, neutral_rec, data, values, fit_bounds, rtol)
+            search = cost_of(base.with_params(values), x0, rec, prof) if prof is not None else cost
         refine = REFINE_ITER if joint else SCREEN_REFINE_ITER
         # a local search's parabolic step only when it promises more than one residual sample's share of the cost
         n_res = max(1, len(rec.t) * len(outs))  # (Δχ² = 1 when the residual is the noise: within the standard error)
-        theta = (element_search(cost, specs, first, local=True, refine_iter=refine, resolution=cost(first) / n_res)
-                 if first is not None else element_search(cost, specs, [s[1] for s in specs], refine_iter=refine))
-        if neutral is not None and not cost(theta) <= cost(neutral):  # the search never ends worse than no element
+        theta = (element_search(search, specs, first, local=True, refine_iter=refine, resolution=search(first) / n_res)
+                 if first is not None else element_search(search, specs, [s[1] for s in specs], refine_iter=refine))
+        if neutral is not None and not search(theta) <= search(neutral):  # the search never ends worse than no element
             theta = [float(v) for v in neutral]
+        if search is not cost and (moved := search.step(theta)):  # the model re-adjusted as the profile says
+            stepped = cost_of(base.with_params({**values, **moved}), x0, rec)
+            if stepped(theta) < cost(theta):
+                values, cost = {**values, **moved}, stepped
         recovery = ""
         if data.free or data.estimate_x0:  # refit the model through the element
             before, stepped = cost(theta), False
@@ -568,7 +530,7 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     # length), then on the whole recording from there (:data:`Data.window`)
     short = rec.window(rec.t[0], rec.t[data.window - 1]) if joint and data.window and data.window < len(rec) else rec
     theta, values, x0, recovery, c = alternate(first, dict(nominal.values), nominal.x0, el.neutral(rec.t, command(rec, where)),
-                                               short)
+                                               short, profiled=True)
     again = _pressed(nominal.values, data, base) if joint else []
     if again:  # the nominal fit pressed a parameter against its range: once more from the values the model was built with
         given = {**nominal.values, **{k: data.given[k] for k in data.free if k in data.given}}  # a later round frees accepted effects' too
