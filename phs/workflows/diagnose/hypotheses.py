@@ -297,22 +297,27 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
                             ftol=ftol, compile=None if joint else False, estimate_x0=data.estimate_x0,
                             weights=_fixed(data.weights))
 
+        def fitted(starts):
+            best, recovery = fit_with_retries(
+                fit_one, starts, neutral=aug.neutral_start(),
+                target={k: system.param(k).value for k in aug.free}, bounds=aug.bounds, log_scale=aug.log_scale,
+                reference=0.5 * nominal.rss)
+            h = score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
+                      seconds=time.perf_counter() - t0, train_residuals=best.residuals)
+            h.recovery = recovery
+            h.undetermined = undetermined(best, aug.free)
+            return _never_worse(nominal, h, aug, data, t0)
+
         # screening needs the gain to a few per cent, not the optimum to eight digits; parameters whose
         # plausible values span decades are screened from the most promising of the candidate's starts
         starts = [{}] + [dict(st) for st in aug.starts]
-        if not joint and not aug.starts:  # a candidate without starts of its own: its strength's decades either side
-            starts += _decade_starts(system, aug)
         if not joint and len(starts) > SCREEN_STARTS:
             starts = _promising_starts(system, starts, x0, data, rtol=rtol)
-        best, recovery = fit_with_retries(
-            fit_one, starts, neutral=aug.neutral_start(),
-            target={k: system.param(k).value for k in aug.free}, bounds=aug.bounds, log_scale=aug.log_scale,
-            reference=0.5 * nominal.rss)
-        h = score(label, system, best.values, best.x0, len(data.free) + len(aug.free), data, augmentation=aug,
-                  seconds=time.perf_counter() - t0, train_residuals=best.residuals)
-        h.recovery = recovery
-        h.undetermined = undetermined(best, aug.free)
-        h = _never_worse(nominal, h, aug, data, t0)
+        h = fitted(starts)
+        decades = _decade_starts(system, aug) if not joint and not aug.starts else []
+        if decades and not h.bic < nominal.bic:  # it does not pay from its start: from its strength's decades either side
+            other = fitted(_promising_starts(system, decades, x0, data, rtol=rtol))
+            h = other if other.bic < h.bic else h
         h.ftol = ftol
         return h
     except FitFailed as exc:
@@ -373,15 +378,17 @@ def _promising_starts(system, starts: list, x0: dict, data: Data, keep: int | No
 
 
 DECADE_STARTS = 100.0
-"""Factor either side of a candidate's start value from which its screening may also start, for a new
-parameter fitted in its logarithm whose range spans at least this factor squared, when the candidate gives
-no starts of its own (:func:`_decade_starts`; the most promising of all by one simulation each,
-:data:`SCREEN_STARTS`).  A strength whose plausible values span decades may lie far from the start its scale
-suggests: on the concealed series resistance at 0.35 of its strength (``examples.concealed_effects``, 3 s,
-the tests' seed 1) the start, 0.02 of the input's level over its current, ended after five evaluations at
-the neutral point and the verdict was ``none``; from the start 100 times weaker the screening lowers the
-validation residual 13.97 → 13.82 and the verdict is ``series_resistance``.  The factor is not chosen on a
-measurement."""
+"""Factor either side of a candidate's start value from which its screening starts again when, from its
+start, it does not pay for its parameters (BIC not lower than the model it extends): for a new parameter
+fitted in its logarithm whose range spans at least this factor squared, when the candidate gives no starts
+of its own (:func:`_decade_starts`; the more promising of the two by one simulation each).  A strength whose
+plausible values span decades may lie far from the start its scale suggests: on the concealed series
+resistance at 0.35 of its strength (``examples.concealed_effects``, 3 s, the tests' seed 1) the start, 0.02
+of the input's level over its current, ended after five evaluations at the neutral point and the verdict
+was ``none``; from the start 100 times weaker the screening lowers the validation residual 13.97 → 13.82
+and the verdict is ``series_resistance``.  Only where the start does not pay: the more promising start by
+its first simulation need not be the one a five-evaluation fit gets furthest from (a start too strong costs
+more at first and may still get there).  The factor is not chosen on a measurement."""
 
 
 def _decade_starts(system, aug) -> list[dict]:
