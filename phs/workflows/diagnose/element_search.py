@@ -15,6 +15,7 @@ Examples
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -276,7 +277,7 @@ def _simulate(system, rec: Recording, x0, params=None, sim=None):
     return sim.run(rec.t, u=u, x0=x0, params=params)
 
 
-def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: float, profile=None):
+def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: float, profile=None) -> Callable:
     """The training cost of an input element's trials on ``rec`` with ``system`` (its parameters fixed, or
     set per call): ``cost(theta, values=None)``, the weighted residual sum of squares
     ``Σ_ch w_ch² Σ (y_ch − ŷ_ch)²`` (the weights of ``data``'s training recording, ``rec`` its window or

@@ -10,11 +10,22 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from codegen import Simulator
-from phs.errors import PHSError
 from phs.workflows.diagnose.element_search import (  # noqa: F401  (_transformed, _simulate re-exported)
-    PRESSED, REFINE_ITER, SCREEN_REFINE_ITER, _pressed, _simulate, _transformed, element_search, extrapolate, input_key,
-    nominal_profile, searched, trial_cost)
+    PRESSED,
+    REFINE_ITER,
+    SCREEN_REFINE_ITER,
+    _pressed,
+    _simulate,
+    _transformed,
+    element_search,
+    extrapolate,
+    input_key,
+    nominal_profile,
+    searched,
+    trial_cost,
+)
 from phs.workflows.diagnose.scoring import _channel_rss, _floors, bic, weight_squared  # noqa: F401  (bic re-exported)
+from phs.workflows.diagnose.starts import _decade_starts, _start_costs
 from phs.workflows.identify import identify, nrmse_fit
 from phs.workflows.recording import Recording
 
@@ -315,9 +326,13 @@ def fit_augmented(nominal: Scored, aug, data: Data, joint: bool = True, max_iter
             starts = _promising_starts(system, starts, x0, data, rtol=rtol)
         h = fitted(starts)
         decades = _decade_starts(system, aug) if not joint and not aug.starts else []
-        if decades and not h.bic < nominal.bic:  # it does not pay from its start: from its strength's decades either side
-            other = fitted(_promising_starts(system, decades, x0, data, rtol=rtol))
-            h = other if other.bic < h.bic else h
+        if decades and not h.bic < nominal.bic:  # it does not pay from its start: from its strength's decades either
+            # side, when one of them is already lower than where the fit ended (by more than one sample's share)
+            costs = _start_costs(system, decades, x0, data, rtol)
+            k = int(np.argmin(costs))
+            if costs[k] < h.rss * (1 - 1 / max(1, data.n_train)):
+                other = fitted([decades[k]])
+                h = other if other.bic < h.bic else h
         h.ftol = ftol
         return h
     except FitFailed as exc:
@@ -362,53 +377,9 @@ def _promising_starts(system, starts: list, x0: dict, data: Data, keep: int | No
     one simulation at ``rtol`` (default the data's; a start whose simulation fails ranks last), in their
     given order."""
     keep = SCREEN_STARTS if keep is None else keep
-    sim = Simulator(system, rtol=rtol or data.rtol, energy=False)
-    w2 = {ch: weight_squared(data.weights, ch, data.recording[ch]) for ch in data.outputs}
-    xs = [x0.get(n, 0.0) for n in system.state_names]
-    costs = []
-    for st in starts:
-        try:
-            r = _simulate(system, data.recording, xs, params=st or None, sim=sim)
-            c = sum(float(np.sum((np.asarray(data.recording[ch]) - r[ch]) ** 2)) * w2[ch] for ch in data.outputs)
-        except (PHSError, RuntimeError):
-            c = math.inf
-        costs.append(c if math.isfinite(c) else math.inf)
+    costs = _start_costs(system, starts, x0, data, rtol or data.rtol)
     chosen = sorted(sorted(range(len(starts)), key=lambda k: costs[k])[:keep])
     return [starts[k] for k in chosen]
-
-
-DECADE_STARTS = 100.0
-"""Factor either side of a candidate's start value from which its screening starts again when, from its
-start, it does not pay for its parameters (BIC not lower than the model it extends): for a new parameter
-fitted in its logarithm whose range spans at least this factor squared, when the candidate gives no starts
-of its own (:func:`_decade_starts`; the more promising of the two by one simulation each).  A strength whose
-plausible values span decades may lie far from the start its scale suggests: on the concealed series
-resistance at 0.35 of its strength (``examples.concealed_effects``, 3 s, the tests' seed 1) the start, 0.02
-of the input's level over its current, ended after five evaluations at the neutral point and the verdict
-was ``none``; from the start 100 times weaker the screening lowers the validation residual 13.97 → 13.82
-and the verdict is ``series_resistance``.  Only where the start does not pay: the more promising start by
-its first simulation need not be the one a five-evaluation fit gets furthest from (a start too strong costs
-more at first and may still get there).  The factor is not chosen on a measurement."""
-
-
-def _decade_starts(system, aug) -> list[dict]:
-    """Starts :data:`DECADE_STARTS` below and above the value ``system`` holds for each new parameter of ``aug``
-    fitted in its logarithm whose range spans at least ``DECADE_STARTS²`` (within the range).
-
-    Examples
-    --------
-    >>> from types import SimpleNamespace as NS
-    >>> m = NS(param=lambda k: NS(value=1.0))
-    >>> _decade_starts(m, NS(free=["a", "b"], log_scale=["a", "b"], bounds={"a": (1e-5, 1e3), "b": (0.5, 2.0)}))
-    [{'a': 0.01}, {'a': 100.0}]
-    """
-    out = []
-    for k in aug.free:
-        lo, hi = aug.bounds.get(k) or (0.0, 0.0)
-        if k in aug.log_scale and lo > 0 and hi >= lo * DECADE_STARTS**2:
-            v = float(system.param(k).value)
-            out += [{k: s} for s in (min(max(v * f, lo * 1.01), hi * 0.99) for f in (1 / DECADE_STARTS, DECADE_STARTS)) if s != v]
-    return out
 
 
 def _never_worse(nominal: Scored, h: Scored, aug, data: Data, t0: float) -> Scored:
@@ -490,7 +461,6 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
     rec = data.recording
     specs = el.parameters(rec.t, command(rec, where))
     outs = data.outputs
-    w2 = {ch: weight_squared(data.weights, ch, rec[ch]) for ch in outs}
 
     rtol = _fit_rtol(data, joint)
     from phs.workflows.diagnose.retry import RECOVERABLE, reason
