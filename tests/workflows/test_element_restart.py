@@ -61,13 +61,13 @@ def _pressed_case(seconds):
     return nom, data, aug
 
 
-def _compare(nom, data, aug, monkeypatch):
+def _compare(nom, data, aug, monkeypatch, restart_alone=True):
     """The joint fit as it runs (its first search on the cost left after the model's first-order
     re-adjustment, :func:`~phs.workflows.diagnose.element_search.nominal_profile`), with the restart alone
-    (no profile), and with neither."""
+    (no profile; ``None`` unless ``restart_alone``), and with neither."""
     profiled = fit_augmented(nom, aug, data, joint=True)
     monkeypatch.setattr(hyp, "nominal_profile", lambda *a: None)
-    with_restart = fit_augmented(nom, aug, data, joint=True)
+    with_restart = fit_augmented(nom, aug, data, joint=True) if restart_alone else None
     monkeypatch.setattr(hyp, "_pressed", lambda *a: [])
     neither = fit_augmented(nom, aug, data, joint=True)
     return profiled, with_restart, neither
@@ -81,13 +81,12 @@ def test_a_fit_pressed_into_a_corner_reaches_the_delay(monkeypatch):
     monkeypatch.setattr(hyp, "ELEMENT_ROUNDS", 3)
     nom, data, aug = _pressed_case(4.0)
     assert _pressed(nom.values, data, nom.system) == ["b.b"]  # the precondition: the damping absorbed the delay
-    hp, h, h0 = _compare(nom, data, aug, monkeypatch)
+    hp, _, h0 = _compare(nom, data, aug, monkeypatch, restart_alone=False)  # the restart alone: the 20 s test below
     tau0 = h0.element_values["time_delay.tau_d"]
-    # measured: 3.96 ms and damping 0.96 profiled; 4.37 ms and 1.21 with the restart alone; 3.32 ms and 0.70
-    # with neither (training residual 4 % higher)
-    for fit in (hp, h):
-        assert abs(fit.element_values["time_delay.tau_d"] / LOOP_DELAY - 1) < 0.15 and abs(fit.values["b.b"] - 1.0) < 0.3
-    assert "b.b" in h.recovery and h.rss < h0.rss and hp.rss < h0.rss
+    # measured: 3.96 ms and damping 0.96 as it runs (the profile and the restart); 4.37 ms and 1.21 with the
+    # restart alone; 3.32 ms and 0.70 with neither (training residual 4 % higher)
+    assert abs(hp.element_values["time_delay.tau_d"] / LOOP_DELAY - 1) < 0.15 and abs(hp.values["b.b"] - 1.0) < 0.3
+    assert hp.rss < h0.rss
     assert abs(tau0 / LOOP_DELAY - 1) > 0.15  # the check can fail: with neither the fit stops short
 
 

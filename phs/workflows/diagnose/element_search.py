@@ -277,6 +277,41 @@ def _simulate(system, rec: Recording, x0, params=None, sim=None):
     return sim.run(rec.t, u=u, x0=x0, params=params)
 
 
+def channel_weights(data) -> dict:
+    """``w_ch`` per output channel of ``data``: the square root of
+    :func:`~phs.workflows.diagnose.scoring.weight_squared` on the whole training recording (the user's
+    weight, else one over the channel's standard deviation); what :func:`weighted_residual` multiplies by.
+
+    Examples
+    --------
+    >>> from phs.workflows.diagnose.hypotheses import Data
+    >>> rec = Recording.from_arrays(np.linspace(0, 1, 4), {"y": np.array([0.0, 4.0, 0.0, 4.0])})
+    >>> data = Data(rec, rec, np.ones(4, bool), None, ["y"], [], {}, [], None)
+    >>> channel_weights(data), channel_weights(replace(data, weights={"y": 3.0}))
+    ({'y': 0.5}, {'y': 3.0})
+    """
+    return {ch: math.sqrt(weight_squared(data.weights, ch, data.recording[ch])) for ch in data.outputs}
+
+
+def weighted_residual(system, rec: Recording, x0, w: dict, params=None, sim=None) -> np.ndarray:
+    """The residual of ``system`` simulated on ``rec``'s inputs from ``x0`` (``params`` overriding its values),
+    ``w_ch (y_ch − ŷ_ch)`` stacked over the channels of ``w`` (:func:`channel_weights`): its square sum is the
+    training cost ``Σ_ch w_ch² RSS_ch``.  A failed simulation raises (``PHSError`` or ``RuntimeError``); a
+    residual that left the finite numbers is returned as it is.
+
+    Examples
+    --------
+    >>> from systems.examples import rc_circuit
+    >>> t = np.linspace(0, 0.01, 101)
+    >>> rec = Recording.from_arrays(t, {"U": np.ones(101), "v_C": np.ones(101)})
+    >>> r = weighted_residual(rc_circuit(), rec, [0.0], {"v_C": 2.0})
+    >>> float(r[0]), bool(0 < r[-1] < r[0])
+    (2.0, True)
+    """
+    s = _simulate(system, rec, x0, params=params, sim=sim)
+    return np.concatenate([(np.asarray(rec[ch], float) - np.asarray(s[ch], float)) * w[ch] for ch in w])
+
+
 def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: float, profile=None) -> Callable:
     """The training cost of an input element's trials on ``rec`` with ``system`` (its parameters fixed, or
     set per call): ``cost(theta, values=None)``, the weighted residual sum of squares
@@ -287,8 +322,9 @@ def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: floa
     give the input of a trial already run (:func:`input_key`).
 
     With a ``profile`` (:func:`nominal_profile`), the cost is the one left after the model's free
-    parameters re-adjust to first order (:meth:`Profile.left`), and ``cost.step(theta)`` gives that
-    re-adjustment.
+    parameters re-adjust to first order (:meth:`Profile.left`), ``cost.step(theta)`` gives that
+    re-adjustment, and the profile's own simulation (the element's neutral point) is not run again.
+    ``cost.raw`` is the cost without the re-adjustment, from the same simulations.
 
     Examples
     --------
@@ -305,9 +341,10 @@ def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: floa
     True
     """
     sim = Simulator(system, rtol=rtol, energy=False)
-    outs = list(data.outputs)
-    w = {ch: math.sqrt(weight_squared(data.weights, ch, data.recording[ch])) for ch in outs}  # the whole training recording's
+    w = channel_weights(data)  # the whole training recording's
     seen: dict = {}
+    if profile is not None and profile.base is not None:  # the profile's own simulation: the element's neutral point
+        seen[(input_key(rec, profile.rec), ())] = (float(profile.base @ profile.base), profile.coefficients(profile.base))
 
     def evaluate(theta, values=None):
         params = tuple(sorted({k: float(values[k]) for k in data.free}.items())) if values is not None else ()
@@ -317,8 +354,7 @@ def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: floa
             same = (input_key(rec, r), params)
             if same not in seen:
                 try:
-                    s = _simulate(system, r, x0, params=dict(params) if values is not None else None, sim=sim)
-                    res = np.concatenate([(np.asarray(r[ch], float) - np.asarray(s[ch], float)) * w[ch] for ch in outs])
+                    res = weighted_residual(system, r, x0, w, params=dict(params) if values is not None else None, sim=sim)
                     c = float(res @ res)
                     seen[same] = (c, profile.coefficients(res) if profile is not None else None) if math.isfinite(c) else (math.inf, None)
                 except (PHSError, RuntimeError):
@@ -330,7 +366,11 @@ def trial_cost(system, x0, rec: Recording, element, where: str, data, rtol: floa
         c, a = evaluate(theta, values)
         return c if a is None else profile.left(c, a)
 
+    def raw(theta, values=None):
+        return evaluate(theta, values)[0]
+
     cost.step = lambda theta: profile.step(evaluate(theta)[1]) if profile is not None and evaluate(theta)[1] is not None else {}
+    cost.raw = raw
     return cost
 
 
@@ -369,6 +409,7 @@ class Profile:
         self.U = U[:, keep]
         self.map = Vt[keep].T / s[keep]  # D⁺ = V Σ⁻¹ Uᵀ: coefficients Uᵀ r to steps in units of h
         self.values, self.steps, self.bounds = dict(values), dict(steps), dict(bounds)
+        self.base, self.rec = None, None  # the residual at ``values`` and the recording it was simulated on
 
     def coefficients(self, r: np.ndarray) -> np.ndarray:
         return self.U.T @ r
@@ -406,12 +447,10 @@ def nominal_profile(system, x0, rec: Recording, data, values: dict, bounds: dict
     if not free:
         return None
     sim = Simulator(system, rtol=rtol, energy=False)
-    outs = list(data.outputs)
-    w = {ch: math.sqrt(weight_squared(data.weights, ch, data.recording[ch])) for ch in outs}  # the whole training recording's
+    w = channel_weights(data)  # the whole training recording's
 
     def residual(vals):
-        s = _simulate(system, rec, x0, params=vals, sim=sim)
-        r = np.concatenate([(np.asarray(rec[ch], float) - np.asarray(s[ch], float)) * w[ch] for ch in outs])
+        r = weighted_residual(system, rec, x0, w, params=vals, sim=sim)
         return r if np.all(np.isfinite(r)) else None
 
     base_vals = {k: float(values[k]) for k in free}
@@ -437,7 +476,9 @@ def nominal_profile(system, x0, rec: Recording, data, values: dict, bounds: dict
             steps[k], used[k] = h, v
     if not cols:
         return None
-    return Profile(np.column_stack(cols), used, steps, {k: tuple(bounds.get(k, (-math.inf, math.inf))) for k in used})
+    prof = Profile(np.column_stack(cols), used, steps, {k: tuple(bounds.get(k, (-math.inf, math.inf))) for k in used})
+    prof.base, prof.rec = base, rec
+    return prof
 
 
 def searched(specs) -> int:

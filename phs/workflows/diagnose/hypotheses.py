@@ -480,7 +480,9 @@ def _fit_input_element(nominal: Scored, aug, data: Data, t0: float, joint: bool 
         if profiled and data.free:
             neutral_rec = _transformed(rec, el, where, neutral if neutral is not None else [s[1] for s in specs])
             prof = nominal_profile(base.with_params(values), x0, neutral_rec, data, values, fit_bounds, rtol)
-            search = cost_of(base.with_params(values), x0, rec, prof) if prof is not None else cost
+            if prof is not None:  # the same simulations serve both
+                search = cost_of(base.with_params(values), x0, rec, prof)
+                cost = search.raw
         refine = REFINE_ITER if joint else SCREEN_REFINE_ITER
         # a local search's parabolic step only when it promises more than one residual sample's share of the cost
         n_res = max(1, len(rec.t) * len(outs))  # (Δχ² = 1 when the residual is the noise: within the standard error)

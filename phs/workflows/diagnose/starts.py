@@ -6,12 +6,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from codegen import Simulator
 from phs.errors import PHSError
-from phs.workflows.diagnose.element_search import _simulate
-from phs.workflows.diagnose.scoring import weight_squared
+from phs.workflows.diagnose.element_search import channel_weights, weighted_residual
 
 DECADE_STARTS = 100.0
 """Factor either side of a candidate's start value from which its screening starts again when, from its
@@ -52,13 +49,13 @@ def _start_costs(system, starts: list, x0: dict, data, rtol: float) -> list[floa
     """The training cost (``Σ_ch w_ch² RSS_ch``, as ``Scored.rss``) of ``system`` at each start, one simulation
     each at ``rtol``; infinite where the simulation fails."""
     sim = Simulator(system, rtol=rtol, energy=False)
-    w2 = {ch: weight_squared(data.weights, ch, data.recording[ch]) for ch in data.outputs}
+    w = channel_weights(data)
     xs = [x0.get(n, 0.0) for n in system.state_names]
     costs = []
     for st in starts:
         try:
-            r = _simulate(system, data.recording, xs, params=st or None, sim=sim)
-            c = sum(float(np.sum((np.asarray(data.recording[ch]) - r[ch]) ** 2)) * w2[ch] for ch in data.outputs)
+            r = weighted_residual(system, data.recording, xs, w, params=st or None, sim=sim)
+            c = float(r @ r)
         except (PHSError, RuntimeError):
             c = math.inf
         costs.append(c if math.isfinite(c) else math.inf)
