@@ -14,6 +14,7 @@ failing for the raw score.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 
@@ -96,6 +97,23 @@ def test_calibration_is_monotone_and_bounded():
         # above the first knot the reported confidence is the in-sample level read through the held-out knots
         above = grid[grid >= CALIBRATION[kind][0][0]]
         assert all(calibrated(v, kind) == level(HELD_OUT_CALIBRATION[kind], level(CALIBRATION[kind], v)) for v in above)
+
+
+def test_the_wrong_verdicts_are_weak_slew_limits_that_never_act(rows):
+    """The stored verdicts scored wrong are the slew-rate limits at 0.35 and 0.6 of the tuned strength: their
+    limits (300 V/s over the strength: 857 and 500 V/s) are above the steepest slope of the recorded
+    commands, training and validation (``examples.concealed_truths._rate_limited`` follows the samples in
+    straight lines, so their slopes are the command's), so the limit never acts and nothing is concealed;
+    at full strength (300 V/s) it acts.  Recomputed from the generator, not read from the stored rows."""
+    from examples.concealed_effects import generate
+
+    wrong = sorted((r["effect"], r["size"], r["seed"]) for r in rows if not r["right"])
+    assert wrong == [("slew_rate_limit", size, seed) for size in (0.35, 0.6) for seed in (3, 4)]
+    for (size, acts), seed in itertools.product(((0.35, False), (0.6, False), (1.0, True)), (3, 4)):
+        train, info = generate("slew_rate_limit", seconds=3.0, seed=seed, size=size)
+        val, _ = generate("slew_rate_limit", seconds=3.0, seed=seed + 100, validation=True, size=size)
+        steepest = max(float(np.max(np.abs(np.diff(np.asarray(r["U"])) / np.diff(np.asarray(r.t))))) for r in (train, val))
+        assert (info["parameters"]["S"] < steepest) == acts, (size, info["parameters"]["S"], steepest)
 
 
 def test_scaling_partial_verdicts_makes_the_confidence_more_reliable(rows):

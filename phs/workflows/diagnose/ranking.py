@@ -37,7 +37,8 @@ noise seeds other than the tests', collected with the screening, refit and defer
 ``phs.workflows.diagnose.screening``).  A fit, not a threshold: the held-out cases
 (:func:`~phs.workflows.diagnose.calibration.is_held_out`) are among the diagnoses it is fitted on, and it is
 judged by cross-validation instead.  On that set a verdict naming an effect was right 74 times in 78 (the
-four wrong ones: weak slew-rate limits named ``quadratic_drag``, which the share rule scales) and a ``none``
+four wrong ones: weak slew-rate limits, which never act on the recorded commands, named ``quadratic_drag``
+and scaled by the share rule) and a ``none``
 2 times in 2, the controls (``none`` means "nothing the library can detect in this recording", not "no
 missing physics"); the raw score does not rank right verdicts above wrong ones (the wrong ones score 0.86
 and 0.98), so every verdict naming an effect is one level.  In sample its Brier score is 0.049 (raw score
