@@ -59,8 +59,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     refit_top : int
         Every hypothesis is first screened by a loose joint fit (a few evaluations); of the ``refit_top``
         most promising, the best and those whose screening lowered the validation residual are then refitted
-        to convergence
-        (0: every hypothesis is fitted to convergence).
+        to convergence, and the screening's best training fit (least BIC) beside them when it lowered the
+        validation residual (0: every hypothesis is fitted to convergence).
     progress : bool
         Print one line per fitted hypothesis on stderr.
     rtol : float
