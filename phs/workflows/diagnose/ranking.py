@@ -239,6 +239,29 @@ def undetermined_effect(h) -> bool:
     return bool(free) and aug.element is None and set(free) <= set(getattr(h, "undetermined", ()) or ())
 
 
+def simplest(hyps):
+    """The simplest sufficient of ``hyps`` (fitted on the same recordings): of those within
+    :data:`SUFFICIENT_MARGIN` of the best validation residual and, among them, of the best training residual
+    (on thousands of samples a parameter more does not buy a lower training residual by overfitting: a
+    simpler hypothesis that leaves much more of it misses structure the validation recording excites
+    less), the one with fewest parameters, then least BIC.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> a = NS(validation_rss=1.00, rss=1.0, n_params=4, bic=-10.0)
+    >>> b = NS(validation_rss=1.02, rss=1.0, n_params=3, bic=-9.0)   # as good, one parameter fewer
+    >>> c = NS(validation_rss=0.50, rss=0.6, n_params=5, bic=-30.0)  # clearly better
+    >>> simplest([a, b]) is b, simplest([a, b, c]) is c
+    (True, True)
+    """
+    best = min(h.validation_rss for h in hyps)
+    good = [h for h in hyps if h.validation_rss <= best * (1 + SUFFICIENT_MARGIN) + 1e-300]
+    best_train = min(h.rss for h in good)
+    good = [h for h in good if h.rss <= best_train * (1 + SUFFICIENT_MARGIN) + 1e-300]
+    return min(good, key=lambda h: (h.n_params, h.bic))
+
+
 def _pick(nominal, hyps, data=None):
     """Best accepted hypothesis, preferring fewer parameters among the equally good ones, and Coulomb
     friction over a hysteresis element that only describes friction (see :data:`FRICTION_LIKE`); with
@@ -251,14 +274,7 @@ def _pick(nominal, hyps, data=None):
         acc = [h for h in acc if not h.worsens]
     if not acc:
         return None
-    # equally good: within the margin of the best on the validation recording and on the training one (on
-    # thousands of samples a parameter more does not buy a lower training residual by overfitting: a simpler
-    # hypothesis that leaves much more of it misses structure the validation recording excites less)
-    best = min(h.validation_rss for h in acc)
-    good = [h for h in acc if h.validation_rss <= best * (1 + SUFFICIENT_MARGIN) + 1e-300]
-    best_train = min(h.rss for h in good)
-    good = [h for h in good if h.rss <= best_train * (1 + SUFFICIENT_MARGIN) + 1e-300]
-    pick = min(good, key=lambda h: (h.n_params, h.bic))
+    pick = simplest(acc)
     if data is not None and pick.augmentation.effect == "hysteresis":
         share = presliding_share(nominal, pick, data)
         friction = [h for h in acc if h.augmentation.effect == "coulomb_friction"

@@ -15,10 +15,19 @@ from phs.errors import InputDataError, ParameterError
 from phs.workflows.diagnose.consistency import pointers, reconcile
 from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
-from phs.workflows.diagnose.ranking import FAILED_FACTOR, _accepted, _gain, _pick, partial, worsened
+from phs.workflows.diagnose.pairs import _earns, _whole, other_first
+from phs.workflows.diagnose.ranking import FAILED_FACTOR, _accepted, _gain, _pick, partial
 from phs.workflows.diagnose.refusal import refusal
 from phs.workflows.diagnose.result import Diagnosis, _verdict
-from phs.workflows.diagnose.screening import _polished, _refit_deferred, _refit_friction_rival, _refit_pointed, _screen_and_refit, refit_alone
+from phs.workflows.diagnose.screening import (
+    _polished,
+    _refit_deferred,
+    _refit_friction_rival,
+    _refit_pointed,
+    _screen_and_refit,
+    refit_alone,
+    scales_of,
+)
 
 SPLIT = 0.7
 """Share of a single recording used for training when no validation recording is given.
@@ -108,8 +117,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     >>> d.effect, d.verdict["cannot_describe"][0]["reasons"], d.hypotheses
     ('model_cannot_describe', ['scale'], [])
     """
-    from components.candidates import LIBRARY, Scales
-    from phs.workflows.diagnose.hypotheses import Data, through_element, train_result
+    from components.candidates import LIBRARY
+    from phs.workflows.diagnose.hypotheses import Data, through_element
     from phs.workflows.diagnose.nominal import fit_nominal
 
     wall = time.perf_counter()
@@ -162,12 +171,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     trial, untried = None, None  # a provisional first of a pair (_traded) and, when no second made it whole, what was tried
     located, located_at, pointed_r = findings, nominal, pointed  # the located mismatch of ``located_at``
     for round_ in range(max_effects):
-        res = train_result(current, data)
-        X = np.asarray(res.x)
-        names = current.system.input_names
-        U = np.column_stack([np.asarray(res[n]) for n in names]) if names else np.zeros((len(X), 0))
-        scales = Scales.of(current.system.with_params(current.values), res.t, X, U,
-                           {ch: data.recording[ch] for ch in outs})
+        scales = scales_of(current, data)
         augs = []
         earlier = {(h.augmentation.effect, h.augmentation.attached_to): h for r in rounds for h in r  # a refit's values over a screening's
                    if h.ok and h.element_values and h.stage != "full"}
@@ -247,6 +251,13 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                     accepted.append(alone)
                     current, data = alone, through_element(data, alone)
                 break
+            if (other := other_first(trial, pick, alone, rounds[-2], cands, data_r, progress, f"round {round_ + 1}")) is not None:
+                first, pair, data_r = other  # another first makes the better pair with this second
+                rounds[-2].remove(first)
+                rounds[-2].insert(0, first)
+                hyps.append(pair)
+                accepted[-1], current, pick = first, first, pair
+                trial = trial._replace(first=first, lowers=dict(first.worsens))
             pick.notes.append(f"Together with {trial.first.label}, which alone lowers {', '.join(trial.lowers)} (validation fit "
                               f"{_fits(trial.lowers)}), it raises the fit without lowering any channel's"
                               + (f", and the pair passes the acceptance rule against {alone.label} alone." if alone is not None else "."))
@@ -386,18 +397,6 @@ residual is at least this share lower and its BIC at least ``MIN_BIC_GAIN`` lowe
 The rival's forward selection stops as soon as its remaining terms could not reach that residual even if
 each removed as much as the last one did (``select(need=...)``): a rival that cannot win is not refitted.
 Not chosen on a measurement (introduced with the Silverbox benchmark without its cubic stiffness)."""
-
-
-def _earns(with_library, alone) -> bool:
-    """Whether accepted library effects earn their place next to a discovered correction: the model with
-    them (``with_library``) passes the library's acceptance rule against the correction alone (BIC
-    ``MIN_BIC_GAIN`` lower, validation residual ``MIN_VALIDATION_GAIN`` lower)."""
-    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
-
-    if alone.validation_rss <= 0:
-        return True
-    gain = (alone.validation_rss - with_library.validation_rss) / alone.validation_rss
-    return alone.bic - with_library.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN
 
 
 def _beats(found, current) -> bool:
@@ -544,19 +543,6 @@ def _second_alone(trial, pick, first_round, progress, label):
         return same[0]
     h = _run_all(trial.before, [_for_refit(same[0])], trial.data, 1, progress, label + " the second alone")[0]
     return h if h.ok else None
-
-
-def _whole(before, h, data) -> bool:
-    """Whether ``h``, the second of a pair whose first was on trial, passes with it the acceptance rule
-    against ``before`` (the model without either: BIC :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`
-    lower, validation residual :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` lower) and lowers
-    none of its channels' validation fits (:func:`~phs.workflows.diagnose.ranking.worsened`)."""
-    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
-
-    if not (h.ok and h.stage == "full") or before.validation_rss <= 0:
-        return False
-    gain = (before.validation_rss - h.validation_rss) / before.validation_rss
-    return before.bic - h.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and not worsened(before, h, data)
 
 
 def _fits(worsens) -> str:

@@ -73,6 +73,21 @@ def _expected_cost(aug) -> tuple:
     return (len(aug.system.states), len(aug.starts), len(aug.free))
 
 
+def scales_of(h, data):
+    """The scales a candidate is attached with (:meth:`components.candidates.Scales.of`) on the fitted model
+    ``h``: its states, inputs and recorded outputs along its simulation of ``data``'s training recording."""
+    import numpy as np
+
+    from components.candidates import Scales
+    from phs.workflows.diagnose.hypotheses import train_result
+
+    res = train_result(h, data)
+    X = np.asarray(res.x)
+    names = h.system.input_names
+    U = np.column_stack([np.asarray(res[n]) for n in names]) if names else np.zeros((len(X), 0))
+    return Scales.of(h.system.with_params(h.values), res.t, X, U, {ch: data.recording[ch] for ch in data.outputs})
+
+
 def _for_refit(h):
     """A screened hypothesis' augmentation, started from its screening values (inside the new parameters'
     bounds: a neutral point may lie outside them) for the joint refit; an input element's refit searches

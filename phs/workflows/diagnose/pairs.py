@@ -1,0 +1,94 @@
+"""The first of a pair on trial, chosen again once its second is known.
+
+An effect that trades channels (it passes the acceptance rule but lowers another channel's validation fit)
+is accepted only as the first of a pair whose second, of the next round, makes the pair whole
+(``run._traded``, :func:`_whole`).  The first is the trading hypothesis of largest validation gain *alone*;
+with the second beside it another trading hypothesis of the same round may make the better pair (an offset
+of the position and a viscoelastic creep both take up the slow part of a motion whose drive also
+saturates: alone the offset fits better, with the saturation the creep).  :func:`other_first` fits the
+second's effect on each other trading first that was fitted in full, and keeps the pair the library's
+choice prefers (:func:`~phs.workflows.diagnose.ranking.simplest`)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from phs.workflows.diagnose.hypotheses import through_element
+from phs.workflows.diagnose.ranking import _accepted, _gain, simplest, worsened
+from phs.workflows.diagnose.screening import _run_all, scales_of
+
+
+def other_first(trial, pick, alone, trial_round, cands, data_r, progress=False, label=""):
+    """The pair on trial with another first when it is the better pair: ``(first, pair, data)``, the other
+    first, the second's effect fitted on it and the data the pair was fitted on; ``None`` when the pair of
+    ``trial.first`` and ``pick`` (fitted on ``data_r``) stays.
+
+    The other firsts are the hypotheses of ``trial_round`` fitted in full that pass the acceptance rule
+    against the model before the pair (``trial.before``) but lower another channel's validation fit, as the
+    trial's first does.  On each, the second's effect at the same place is fitted in full from the second's
+    values; a pair counts when it is whole (:func:`_whole`) and its first earns its place beside the second
+    fitted ``alone`` (:func:`_earns`; ``alone`` is ``None`` when it has no fit).  The choice among the pairs
+    is the library's own (:func:`~phs.workflows.diagnose.ranking.simplest`)."""
+    before, first = trial.before, trial.first
+    others = [h for h in trial_round if h is not first and h.ok and h.stage == "full" and h.worsens
+              and _accepted(before, h) and h.augmentation.effect != pick.augmentation.effect]
+    cand = next((c for c in cands if c.effect == pick.augmentation.effect), None)
+    if not others or cand is None:
+        return None
+    pairs, said = [], []
+    for h in sorted(others, key=lambda h: -_gain(before, h)):
+        free = [k for k in data_r.free if k not in first.augmentation.free] + list(h.augmentation.free)
+        data_h = replace(through_element(replace(trial.data, free=list(dict.fromkeys(free))), h), free=list(dict.fromkeys(free)))
+        try:
+            aug = cand.augment(h.system.with_params(h.values), pick.augmentation.attached_to, scales_of(h, data_h))
+        except Exception:  # noqa: BLE001 - a second that cannot attach on this first: no such pair
+            continue
+        aug = aug if aug.summary else replace(aug, summary=cand.summary)
+        if aug.element is not None:  # searched around the second's values first
+            aug = replace(aug, starts=(dict(pick.element_values),) if pick.element_values else ())
+        else:
+            values = {k: pick.values[k] for k in aug.free if k in pick.values}
+            values = {k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) if k in aug.bounds else v for k, v in values.items()}
+            aug = replace(aug, system=aug.system.with_params(values), starts=())
+        pair = _run_all(h, [aug], data_h, 1, progress, f"{label} {h.label} as the first")[0]
+        whole = _whole(before, pair, trial.data)
+        if whole and (alone is None or _earns(pair, alone)):
+            pairs.append((h, pair, data_h))
+        else:
+            said.append(f"With {h.label} as its first instead, the pair "
+                        + ("fit failed" if not pair.ok else "does not earn its place" if whole else "is not whole") + ".")
+    best = simplest([pick] + [p for _, p, _ in pairs])
+    chosen = next(((h, p, d) for h, p, d in pairs if p is best), None)
+    if chosen is not None:
+        said.insert(0, f"{chosen[0].label} was chosen as the first of the pair over {first.label}, which fits better alone: "
+                       f"with {pick.augmentation.effect} the pair with {chosen[0].label} is the better (validation residual "
+                       f"{best.validation_rss:.4g} against {pick.validation_rss:.4g}, BIC {best.bic - pick.bic:+.1f}).")
+    said += [f"With {h.label} as its first instead the pair fits no better (validation residual {p.validation_rss:.4g}, "
+             f"BIC {p.bic - best.bic:+.1f} against this pair's)." for h, p, _ in pairs if p is not best]
+    best.notes.extend(said)
+    return chosen
+
+
+def _earns(with_library, alone) -> bool:
+    """Whether accepted library effects earn their place next to a discovered correction: the model with
+    them (``with_library``) passes the library's acceptance rule against the correction alone (BIC
+    ``MIN_BIC_GAIN`` lower, validation residual ``MIN_VALIDATION_GAIN`` lower)."""
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+
+    if alone.validation_rss <= 0:
+        return True
+    gain = (alone.validation_rss - with_library.validation_rss) / alone.validation_rss
+    return alone.bic - with_library.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN
+
+
+def _whole(before, h, data) -> bool:
+    """Whether ``h``, the second of a pair whose first was on trial, passes with it the acceptance rule
+    against ``before`` (the model without either: BIC :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`
+    lower, validation residual :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` lower) and lowers
+    none of its channels' validation fits (:func:`~phs.workflows.diagnose.ranking.worsened`)."""
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+
+    if not (h.ok and h.stage == "full") or before.validation_rss <= 0:
+        return False
+    gain = (before.validation_rss - h.validation_rss) / before.validation_rss
+    return before.bic - h.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and not worsened(before, h, data)
