@@ -405,7 +405,8 @@ class Profile:
 
     def __init__(self, D: np.ndarray, values: dict, steps: dict, bounds: dict):
         U, s, Vt = np.linalg.svd(D, full_matrices=False)
-        keep = s > PROFILE_RCOND * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
+        # (and none whose inverse overflows: a direction of subnormal size carries nothing)
+        keep = s > max(PROFILE_RCOND * s[0], np.finfo(float).tiny) if s.size else np.zeros(s.shape, bool)
         self.U = U[:, keep]
         self.map = Vt[keep].T / s[keep]  # D⁺ = V Σ⁻¹ Uᵀ: coefficients Uᵀ r to steps in units of h
         self.values, self.steps, self.bounds = dict(values), dict(steps), dict(bounds)
@@ -420,6 +421,8 @@ class Profile:
     def step(self, a: np.ndarray) -> dict:
         names = list(self.steps)
         delta = -(self.map @ a) * np.array([self.steps[k] for k in names])
+        if not np.all(np.isfinite(delta)):  # no first-order step to take
+            return {}
         rel = max((abs(d) / abs(self.values[k]) for k, d in zip(names, delta, strict=True) if self.values[k] != 0), default=0.0)
         if rel > PROFILE_TRUST:
             delta = delta * (PROFILE_TRUST / rel)
