@@ -38,7 +38,7 @@ def other_first(trial, pick, alone, trial_round, cands, data_r, progress=False, 
     pairs, said = [], []
     for h in sorted(others, key=lambda h: -_gain(before, h)):
         free = [k for k in data_r.free if k not in first.augmentation.free] + list(h.augmentation.free)
-        data_h = replace(through_element(replace(trial.data, free=list(dict.fromkeys(free))), h), free=list(dict.fromkeys(free)))
+        data_h = through_element(replace(trial.data, free=list(dict.fromkeys(free))), h)  # (which keeps ``free``)
         try:
             aug = cand.augment(h.system.with_params(h.values), pick.augmentation.attached_to, scales_of(h, data_h))
         except Exception:  # noqa: BLE001 - a second that cannot attach on this first: no such pair
