@@ -102,15 +102,16 @@ def test_an_interrupted_sweep_keeps_its_finished_rows_and_resumes(tmp_path, sig,
     assert [int(r["run"]) for r in rows] == list(range(6)) and {r["status"] for r in rows} == {"ok"}
 
 
-# Two cheap runs (a 1 Hz sine), then a chunk of two runs driven by a 3 kHz sine over 4 s, one per thread of
+# Two cheap runs (a 1 Hz sine), then a chunk of two runs driven by a 3 kHz sine over 10 s, one per thread of
 # CasADi's threaded map (they share their input: one map call): CVODES resolves every period, and the chunk takes
-# 3.6-3.8 s (measured by the resume: its JSON's "seconds").  A smooth input has no breakpoint: little is built
+# about 5 s idle (measured by the resume: its JSON's "seconds"; 1.9 s over 4 s, too close to a loaded machine's
+# stop of 1.3 s for the comparison below).  A smooth input has no breakpoint: little is built
 # before the chunk evaluates, so a signal shortly after the first part lands in the threaded evaluation.  Before
-# the evaluation ran in a worker thread, such a signal waited for the chunk: the command stopped 3.6-4.6 s after it.
-LONG_CHUNK = ["sweep", "systems.examples:rc_circuit", "--t-end", "4", "--dt", "1e-3", "--input", "U=sin(2*pi*f*t)",
+# the evaluation ran in a worker thread, such a signal waited for the chunk: the command stopped only when the chunk ended.
+LONG_CHUNK = ["sweep", "systems.examples:rc_circuit", "--t-end", "10", "--dt", "1e-3", "--input", "U=sin(2*pi*f*t)",
               "--range", "f=1,3000", "--range", "R.R=1e3,2e3", "--metric", "final:v_C", "--chunk", "2", "--threads", "2",
               "--quiet"]
-STOP_SECONDS = 3.0  # measured 0.3-1.0 s (the interpreter's exit competes with the abandoned chunk's two threads)
+STOP_SECONDS = 3.0  # measured 0.3-1.3 s (the interpreter's exit competes with the abandoned chunk's two threads)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -119,7 +120,7 @@ def test_a_threaded_sweep_stops_inside_its_chunk(tmp_path, sig):
     out = tmp_path / "out.csv"
     proc = _start(LONG_CHUNK + ["--out", str(out)], tmp_path)
     _wait_for_parts(proc, str(out) + ".parts", 1)
-    time.sleep(0.5)  # inside the long chunk's evaluation (3.6-3.8 s)
+    time.sleep(0.5)  # inside the long chunk's evaluation (about 5 s)
     code, err, seconds = _stop(proc, sig)
     assert code == 128 + sig, err
     assert f"interrupted ({signal.Signals(sig).name})" in err and "Traceback" not in err
