@@ -126,7 +126,7 @@ def reconcile(verdict: dict, pointed: list[Pointer], tried=()) -> dict:
     >>> v["confidence"], v["disagrees_with_located"]
     (0.3, ['dry friction'])
     >>> v["explanation"].split("; ")[-1]
-    'its hypotheses coulomb_friction@m.p were fitted in full and did not pass (confidence scaled by 0.6).'
+    'its hypotheses coulomb_friction@m.p were fitted in full and not named (confidence scaled by 0.6).'
     """
     missing = unmatched(pointed, verdict.get("effects") or [])
     if not missing:
@@ -135,7 +135,7 @@ def reconcile(verdict: dict, pointed: list[Pointer], tried=()) -> dict:
     named = "no effect" if verdict.get("effect", "none") == "none" else ", ".join(verdict.get("effects") or [verdict["effect"]])
     family = {e for p in missing for e in p.effects}
     fitted = [lab for lab in tried if lab.split("@", 1)[0] in family]
-    how = (f"its hypotheses {', '.join(fitted)} were fitted in full and did not pass" if fitted else
+    how = (f"its hypotheses {', '.join(fitted)} were fitted in full and not named" if fitted else
            f"none of its effects ({', '.join(sorted(family))}) was among the candidates")
     out["confidence"] = round(float(verdict["confidence"]) * DISAGREE_FACTOR, 3)
     out["disagrees_with_located"] = [p.family for p in missing]

@@ -36,21 +36,8 @@ def other_first(trial, pick, alone, trial_round, cands, data_r, progress=False, 
     if not others or cand is None:
         return None
     pairs, said = [], []
-    for h in sorted(others, key=lambda h: -_gain(before, h)):
-        free = [k for k in data_r.free if k not in first.augmentation.free] + list(h.augmentation.free)
-        data_h = through_element(replace(trial.data, free=list(dict.fromkeys(free))), h)  # (which keeps ``free``)
-        try:
-            aug = cand.augment(h.system.with_params(h.values), pick.augmentation.attached_to, scales_of(h, data_h))
-        except Exception:  # noqa: BLE001 - a second that cannot attach on this first: no such pair
-            continue
-        aug = aug if aug.summary else replace(aug, summary=cand.summary)
-        if aug.element is not None:  # searched around the second's values first
-            aug = replace(aug, starts=(dict(pick.element_values),) if pick.element_values else ())
-        else:
-            values = {k: pick.values[k] for k in aug.free if k in pick.values}
-            values = {k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) if k in aug.bounds else v for k, v in values.items()}
-            aug = replace(aug, system=aug.system.with_params(values), starts=())
-        pair = _run_all(h, [aug], data_h, 1, progress, f"{label} {h.label} as the first")[0]
+    others.sort(key=lambda h: -_gain(before, h))
+    for h, pair, data_h in _on_firsts(others, first, pick, cand, trial.data, data_r, progress, label):
         whole = _whole(before, pair, trial.data)
         if whole and (alone is None or _earns(pair, alone)):
             pairs.append((h, pair, data_h))
@@ -63,6 +50,82 @@ def other_first(trial, pick, alone, trial_round, cands, data_r, progress=False, 
         said.insert(0, f"{chosen[0].label} was chosen as the first of the pair over {first.label}, which fits better alone: "
                        f"with {pick.augmentation.effect} the pair with {chosen[0].label} is the better (validation residual "
                        f"{best.validation_rss:.4g} against {pick.validation_rss:.4g}, BIC {best.bic - pick.bic:+.1f}).")
+    said += [f"With {h.label} as its first instead the pair fits no better (validation residual {p.validation_rss:.4g}, "
+             f"BIC {p.bic - best.bic:+.1f} against this pair's)." for h, p, _ in pairs if p is not best]
+    best.notes.extend(said)
+    return chosen
+
+
+def _on_firsts(others, first, second, cand, data_before, data_r, progress=False, label=""):
+    """``(h, pair, data)`` for each hypothesis ``h`` of ``others`` (fitted in full, in the round of ``first``):
+    the effect of ``second`` (a hypothesis of the next round, fitted on ``first``; ``cand`` its candidate)
+    attached at the same place on ``h`` and fitted in full from the second's values, and the data the pair
+    was fitted on (``data_before``, the data before ``first``, with the free parameters of ``data_r`` but
+    ``first``'s own replaced by ``h``'s, through ``h``'s input element).  A second that cannot attach on
+    ``h`` gives no pair; largest gain over ``first``'s round first."""
+    out = []
+    for h in others:
+        free = [k for k in data_r.free if k not in first.augmentation.free] + list(h.augmentation.free)
+        data_h = through_element(replace(data_before, free=list(dict.fromkeys(free))), h)  # (which keeps ``free``)
+        try:
+            aug = cand.augment(h.system.with_params(h.values), second.augmentation.attached_to, scales_of(h, data_h))
+        except Exception:  # noqa: BLE001 - a second that cannot attach on this first: no such pair
+            continue
+        aug = aug if aug.summary else replace(aug, summary=cand.summary)
+        if aug.element is not None:  # searched around the second's values first
+            aug = replace(aug, starts=(dict(second.element_values),) if second.element_values else ())
+        else:
+            values = {k: second.values[k] for k in aug.free if k in second.values}
+            values = {k: min(max(v, aug.bounds[k][0]), aug.bounds[k][1]) if k in aug.bounds else v for k, v in values.items()}
+            aug = replace(aug, system=aug.system.with_params(values), starts=())
+        out.append((h, _run_all(h, [aug], data_h, 1, progress, f"{label} {h.label} as the first")[0], data_h))
+    return out
+
+
+def first_for_small(first, second, alone, before, first_round, cands, data_before, data_r, adds, progress=False, label=""):
+    """The first effect chosen again when the best second fitted on it adds too small a share: ``(first', pair,
+    data)``, another first of ``first``'s round, the second's effect fitted on it and the data the pair was
+    fitted on; ``None`` when ``first`` stays alone.
+
+    ``second`` is the hypothesis of the next round the library would choose on ``first`` but for the share a
+    later effect must add (``adds(first, second)`` is false).  ``first`` may have taken up part of the second's
+    effect with part of its own (a hysteresis loop fitted where a creep and a cubic stiffness act): on each
+    other hypothesis of ``first_round`` fitted in full that passes the acceptance rule against ``before`` (the
+    model before ``first``) and lowers no channel, the second's effect at the same place is fitted in full.
+    A pair counts when the second adds its share beyond its first (``adds``), the pair passes the acceptance
+    rule against ``first`` alone (it is better than the best single effect) lowering none of its channels,
+    and its first earns its place beside the second fitted ``alone`` (:func:`_earns`; ``None``: no such fit).
+    The choice among the pairs that count is the library's own
+    (:func:`~phs.workflows.diagnose.ranking.simplest`)."""
+    others = [h for h in first_round if h is not first and h.ok and h.stage == "full" and not h.worsens
+              and _accepted(before, h) and h.augmentation.effect not in (first.augmentation.effect, second.augmentation.effect)]
+    cand = next((c for c in cands if c.effect == second.augmentation.effect), None)
+    if not others or cand is None:
+        return None
+    pairs, said = [], []
+    others.sort(key=lambda h: -_gain(before, h))
+    for h, pair, data_h in _on_firsts(others, first, second, cand, data_before, data_r, progress, label):
+        if not pair.ok:
+            said.append(f"With {h.label} as its first instead, the pair's fit failed.")
+            continue
+        share = adds(h, pair)
+        better = _accepted(first, pair) and not worsened(first, pair, data_h)
+        if share and better and (alone is None or _earns(pair, alone)):
+            pairs.append((h, pair, data_h))
+        else:
+            said.append(f"With {h.label} as its first instead, the pair "
+                        + ("adds too small a share beyond its first" if not share
+                           else "is no better than " + first.label + " alone" if not better else "does not earn its place")
+                        + f" (validation residual {pair.validation_rss:.4g} against {first.validation_rss:.4g}).")
+    if not pairs:
+        second.notes.extend(said)
+        return None
+    best = simplest([p for _, p, _ in pairs])
+    chosen = next((h, p, d) for h, p, d in pairs if p is best)
+    said.insert(0, f"{chosen[0].label} was chosen as the first of the pair over {first.label}, which fits better alone: "
+                   f"{second.augmentation.effect} adds {second.later_share:.3f} of the nominal model's mismatch beyond "
+                   f"{first.label}, {best.later_share:.3f} beyond {chosen[0].label} (validation residual "
+                   f"{best.validation_rss:.4g} against {first.validation_rss:.4g} for {first.label} alone).")
     said += [f"With {h.label} as its first instead the pair fits no better (validation residual {p.validation_rss:.4g}, "
              f"BIC {p.bic - best.bic:+.1f} against this pair's)." for h, p, _ in pairs if p is not best]
     best.notes.extend(said)

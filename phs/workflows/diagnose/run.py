@@ -15,7 +15,7 @@ from phs.errors import InputDataError, ParameterError
 from phs.workflows.diagnose.consistency import pointers, reconcile
 from phs.workflows.diagnose.discover.naming import explained_share
 from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
-from phs.workflows.diagnose.pairs import _earns, _whole, other_first
+from phs.workflows.diagnose.pairs import _earns, _whole, first_for_small, other_first
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, _accepted, _gain, _pick, partial
 from phs.workflows.diagnose.refusal import refusal
 from phs.workflows.diagnose.result import Diagnosis, _verdict
@@ -170,7 +170,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
     current, accepted, all_hyps, rounds, small = nominal, [], [], [], []
     trial, untried = None, None  # a provisional first of a pair (_traded) and, when no second made it whole, what was tried
     located, located_at, pointed_r = findings, nominal, pointed  # the located mismatch of ``located_at``
+    starts = []  # the model and data each round starts from
     for round_ in range(max_effects):
+        starts.append((current, data))
         scales = scales_of(current, data)
         augs = []
         earlier = {(h.augmentation.effect, h.augmentation.attached_to): h for r in rounds for h in r  # a refit's values over a screening's
@@ -236,6 +238,19 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         unfiltered = _pick(current, hyps, data_r) if round_ > 0 else None
         if unfiltered is not None and unfiltered is not pick and (unfiltered.later_share or 0.0) < LATER_SHARE:
             small.append(unfiltered)  # it would have been named: the verdict says why not
+            if pick is None and trial is None:  # the first may have taken up part of it: another first of its round
+                before, data_b = starts[-2]
+                alone = _second_alone(_Trial(current, before, data_b, 0, {}), unfiltered, rounds[-2], progress,
+                                      f"round {round_ + 1}")
+                other = first_for_small(current, unfiltered, alone, before, rounds[-2], cands, data_b, data_r,
+                                        lambda f, h, d=data_r: _adds_share(nominal, f, h, d, noise), progress, f"round {round_ + 1}")
+                if other is not None:
+                    first, pick, data_r = other
+                    small.pop()
+                    rounds[-2].remove(first)
+                    rounds[-2].insert(0, first)
+                    hyps.append(pick)
+                    accepted[-1], current = first, first
         lowers = None  # what the first of a pair on trial lowers alone (_traded)
         if pick is None and trial is None and round_ + 1 < max_effects:
             pick = _traded(current, hyps)
