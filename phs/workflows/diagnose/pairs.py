@@ -100,7 +100,7 @@ def first_for_small(first, second, alone, before, first_round, cands, data_befor
     others = [h for h in first_round if h is not first and h.ok and h.stage == "full" and not h.worsens
               and _accepted(before, h) and h.augmentation.effect not in (first.augmentation.effect, second.augmentation.effect)]
     cand = next((c for c in cands if c.effect == second.augmentation.effect), None)
-    if not others or cand is None:
+    if not others or cand is None or first.validation_rss <= 0:
         return None
     pairs, said = [], []
     others.sort(key=lambda h: -_gain(before, h))
@@ -109,7 +109,7 @@ def first_for_small(first, second, alone, before, first_round, cands, data_befor
             said.append(f"With {h.label} as its first instead, the pair's fit failed.")
             continue
         share = adds(h, pair)
-        better = _accepted(first, pair) and not worsened(first, pair, data_h)
+        better = pair.stage == "full" and _passes(first, pair) and not worsened(first, pair, data_h)
         if share and better and (alone is None or _earns(pair, alone)):
             pairs.append((h, pair, data_h))
         else:
@@ -136,12 +136,7 @@ def _earns(with_library, alone) -> bool:
     """Whether accepted library effects earn their place next to a discovered correction: the model with
     them (``with_library``) passes the library's acceptance rule against the correction alone (BIC
     ``MIN_BIC_GAIN`` lower, validation residual ``MIN_VALIDATION_GAIN`` lower)."""
-    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
-
-    if alone.validation_rss <= 0:
-        return True
-    gain = (alone.validation_rss - with_library.validation_rss) / alone.validation_rss
-    return alone.bic - with_library.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN
+    return alone.validation_rss <= 0 or _passes(alone, with_library)
 
 
 def _whole(before, h, data) -> bool:
@@ -149,9 +144,25 @@ def _whole(before, h, data) -> bool:
     against ``before`` (the model without either: BIC :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN`
     lower, validation residual :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` lower) and lowers
     none of its channels' validation fits (:func:`~phs.workflows.diagnose.ranking.worsened`)."""
-    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
-
     if not (h.ok and h.stage == "full") or before.validation_rss <= 0:
         return False
-    gain = (before.validation_rss - h.validation_rss) / before.validation_rss
-    return before.bic - h.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN and not worsened(before, h, data)
+    return _passes(before, h) and not worsened(before, h, data)
+
+
+def _passes(ref, h) -> bool:
+    """Whether ``h`` passes the acceptance rule against ``ref``, whatever model ``h`` was fitted from: BIC
+    :data:`~phs.workflows.diagnose.ranking.MIN_BIC_GAIN` lower and validation residual
+    :data:`~phs.workflows.diagnose.ranking.MIN_VALIDATION_GAIN` lower than ``ref``'s (``ref``'s validation
+    residual positive).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> ref = NS(validation_rss=1.0, bic=0.0)
+    >>> _passes(ref, NS(validation_rss=0.5, bic=-100.0)), _passes(ref, NS(validation_rss=0.999, bic=-100.0))
+    (True, False)
+    """
+    from phs.workflows.diagnose.ranking import MIN_BIC_GAIN, MIN_VALIDATION_GAIN
+
+    gain = (ref.validation_rss - h.validation_rss) / ref.validation_rss
+    return ref.bic - h.bic >= MIN_BIC_GAIN and gain >= MIN_VALIDATION_GAIN
