@@ -22,6 +22,8 @@ cases).
 
     python bench/diagnose.py --pairs 20 --no-baseline   # 20 random pairs of effects in one truth
     python bench/diagnose.py --pairs 2 --seconds 4 --no-baseline   # smoke test of the pairs
+    python bench/diagnose.py --lab --pairs 4 --no-baseline   # 4 random pairs under the lab protocols
+    python bench/diagnose.py --lab --effects esa:time_delay+cubic_stiffness@1kHz --no-baseline   # one lab pair
 
 The baseline, measured in the same run (``--no-baseline`` skips it), is the same diagnosis without
 screening: every hypothesis fitted jointly to convergence (``refit_top=0``).
@@ -32,7 +34,10 @@ each truth holds two effects ``A+B`` at their single-effect strengths.  A verdic
 its effects are exactly the two, "one named" when exactly one of the two is among them; every case
 reports ``truth_effects``, ``named`` (how many of the two the verdict names), ``both_named`` and
 ``one_named``, and the JSON line gains ``both_named_rate``, ``one_named_rate``, ``pairs`` and
-``pair_seed`` (``verdict_correct`` is then the both-named rate).
+``pair_seed`` (``verdict_correct`` is then the both-named rate).  With ``--lab`` the pairs are lab cases
+of the electrostatic actuator (:func:`lab_pairs`: the same pairs, each at a rate drawn from 500 Hz, 1 kHz
+and 2 kHz, five free nominal parameters); ``--effects`` with ``--lab`` takes any case
+:func:`examples.lab_protocols.parse_case` reads.
 
 The last line printed is one JSON object: ``seconds_per_case`` (mean), ``max_seconds``,
 ``verdict_correct`` (share of cases whose verdict names the truth's effect), ``cases`` (per case:
@@ -63,10 +68,13 @@ import resource
 import sys
 import time
 
+import numpy as np
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from examples import concealed_loops, lab_protocols  # noqa: E402
 from examples.concealed_effects import EFFECTS, NOMINAL_FREE, generate, random_pairs  # noqa: E402
+from phs.errors import InputDataError  # noqa: E402
 from phs.workflows.diagnose import diagnose  # noqa: E402
 from systems.electrostatic_actuator import electrostatic_actuator  # noqa: E402
 
@@ -149,6 +157,24 @@ def install_clock() -> PhaseClock:
 CLOCK: PhaseClock | None = None
 
 
+def _is_lab(case: str) -> bool:
+    """Whether ``case`` is a lab-protocol case (:func:`examples.lab_protocols.parse_case`)."""
+    try:
+        lab_protocols.parse_case(case)
+    except InputDataError:
+        return False
+    return True
+
+
+def lab_pairs(n: int, seed: int = 0) -> list[str]:
+    """``n`` random pairs of effects (:func:`examples.concealed_effects.random_pairs`) as lab cases of the
+    electrostatic actuator, each at a rate drawn from :data:`examples.lab_protocols.RATE_NAMES` (the same for
+    the same seed)."""
+    rates = list(lab_protocols.RATE_NAMES)
+    rng = np.random.default_rng([int(seed), 7])
+    return [f"esa:{p}@{rates[i]}" for p, i in zip(random_pairs(n, seed), rng.integers(len(rates), size=n), strict=True)]
+
+
 def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) -> dict:
     kw = {}
     if effect.startswith("loop:"):
@@ -161,16 +187,17 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
             where = info.get("place")
             return (sorted(d.verdict["effects"]) == sorted(info["effects"])
                     and (where is None or all(a.augmentation.attached_to == where for a in d.accepted)))
-    elif effect in lab_protocols.LAB_CASES:
+    elif _is_lab(effect):
         train, info = lab_protocols.generate(effect, seconds=seconds, seed=1)
         val, _ = lab_protocols.generate(effect, seconds=seconds, seed=2, validation=True)
         act = lab_protocols.ACTUATORS[info["actuator"]]
         model, free = act.nominal(), info["free"]
         kw = {"x0": info["x0"], "outputs": list(act.channels)}
         truth_effect = info["effect"]
+        pair = truth_effect.split("+")
 
-        def right(d):  # the verdict names the concealed effect
-            return d.effect == truth_effect
+        def right(d):  # the verdict names the concealed effect (both of a pair, nothing else)
+            return sorted(d.verdict["effects"]) == sorted(pair) if len(pair) == 2 else d.effect == truth_effect
     elif "+" in effect:  # a pair of effects in one truth
         train, info = generate(effect, seconds=seconds, seed=1)
         val, _ = generate(effect, seconds=seconds, seed=2, validation=True)
@@ -201,7 +228,7 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
         "validation_fit_before": {k: round(v, 2) for k, v in d.nominal.validation_fit_percent.items()},
         "validation_fit_after": {k: round(v, 2) for k, v in d.final.validation_fit_percent.items()},
     }
-    if "+" in effect and not effect.startswith("loop:"):
+    if "+" in effect and not effect.startswith("loop:"):  # a pair (of the concealed effects or a lab case)
         named = sum(e in d.verdict["effects"] for e in pair)
         out.update(truth_effects=list(pair), named=named, both_named=out["correct"], one_named=named == 1)
     return out
@@ -221,8 +248,8 @@ def main(argv=None) -> dict:
                     help="run N random pairs of effects (each truth holds two) instead of the single-effect cases")
     ap.add_argument("--pair-seed", type=int, default=0, help="seed of the random pairs (default 0)")
     args = ap.parse_args(argv)
-    if args.pairs is not None and (args.lab or args.quick):
-        ap.error("--pairs runs the pair cases alone: not with --lab or --quick")
+    if args.pairs is not None and args.quick:
+        ap.error("--pairs runs the pair cases alone: not with --quick")
     global CLOCK
     CLOCK = CLOCK or install_clock()
     effects = EFFECTS + LOOPS if args.effects == "all" else [e.strip() for e in args.effects.split(",")]
@@ -230,9 +257,10 @@ def main(argv=None) -> dict:
     if args.lab:
         lab = list(lab_protocols.LAB_CASES)
         effects = lab if args.effects in ("all", ",".join(DEFAULT)) else effects
-        unknown = [e for e in effects if e not in lab]
+        unknown = [e for e in effects if not _is_lab(e)]
         if unknown:
-            ap.error(f"--lab: unknown case(s) {unknown}; known: {', '.join(lab)}")
+            ap.error(f"--lab: unknown case(s) {unknown}; listed: {', '.join(lab)}, or any actuator:effect@rate "
+                     "(examples/lab_protocols.py, parse_case)")
         seconds = 17.0 if args.seconds == 20.0 else args.seconds
         if args.quick:
             effects, seconds = LAB_QUICK, 3.0
@@ -240,7 +268,7 @@ def main(argv=None) -> dict:
         effects, seconds = ["charge_retention", "none"], 4.0
     if args.pairs is not None:
         try:
-            effects = random_pairs(args.pairs, args.pair_seed)
+            effects = (lab_pairs if args.lab else random_pairs)(args.pairs, args.pair_seed)
         except ValueError as err:
             ap.error(str(err))
     cases = {}

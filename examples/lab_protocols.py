@@ -28,6 +28,9 @@ Noise
 
     python examples/lab_protocols.py --out DIR [--cases A,B] [--seconds S]
 
+A case is a key of :data:`LAB_CASES` or any ``actuator:effect@rate`` (:func:`parse_case`): on ``esa`` any
+effect of :mod:`examples.concealed_truths` or a pair ``A+B`` of them, at 500 Hz, 1 kHz or 2 kHz.
+
 writes ``DIR/{case}_{train,validation}.csv`` (``:`` and ``@`` of the case name as ``_``).
 
 Examples
@@ -44,7 +47,9 @@ import argparse
 import functools
 import math
 import os
+import re
 import sys
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,6 +128,44 @@ LAB_CASES = {
     "msd:none@500Hz": ("msd", "none", 500.0),
 }
 """The lab set: case name -> (actuator, effect, sampling rate [Hz])."""
+RATE_NAMES = {"500Hz": 500.0, "1kHz": 1000.0, "2kHz": 2000.0}
+_CASE = re.compile(r"(esa|msd):([a-z_]+(?:\+[a-z_]+)?)@(500Hz|1kHz|2kHz)")
+
+
+def parse_case(case: str) -> tuple[str, str, float]:
+    """``(actuator, effect, rate)`` of a lab case: a key of :data:`LAB_CASES`, or any ``actuator:effect@rate``
+    with an effect the actuator's truths know (``esa``: those of :mod:`examples.concealed_truths` or a pair
+    ``A+B`` of them; ``msd``: :data:`MSD_EFFECTS`) at a rate of :data:`RATE_NAMES`.
+
+    Examples
+    --------
+    >>> parse_case("esa:time_delay+cubic_stiffness@1kHz")
+    ('esa', 'time_delay+cubic_stiffness', 1000.0)
+    >>> parse_case("esa:warp@1kHz")
+    Traceback (most recent call last):
+    ...
+    phs.errors.InputDataError: lab case 'esa:warp@1kHz': unknown effect 'warp'; known: ...
+    """
+    if case in LAB_CASES:
+        return LAB_CASES[case]
+    m = _CASE.fullmatch(case) if isinstance(case, str) else None
+    if m is None:
+        raise InputDataError(f"unknown lab case {case!r}: not actuator:effect@rate with an actuator of "
+                             f"{', '.join(ACTUATORS)} and a rate of {', '.join(RATE_NAMES)}; listed: {', '.join(LAB_CASES)}")
+    name, effect, rate = m.groups()
+    try:
+        truth_of(name, effect)
+    except InputDataError as err:
+        raise InputDataError(f"lab case {case!r}: {err}") from None
+    return name, effect, RATE_NAMES[rate]
+
+
+def _case_seed(case: str) -> int:
+    """The first entry of a case's noise seed: its place in :data:`LAB_CASES` (from 1), else a checksum of
+    its name from 1000 up (the same on every machine)."""
+    if case in LAB_CASES:
+        return list(LAB_CASES).index(case) + 1
+    return 1000 + zlib.crc32(case.encode()) % 1_000_000
 
 
 def msd_truth(effect: str) -> Truth:
@@ -372,7 +415,8 @@ def generate(case: str, *, seconds: float = 17.0, seed: int = 0, validation: boo
     Parameters
     ----------
     case : str
-        A key of :data:`LAB_CASES` (``actuator:effect@rate``).
+        A key of :data:`LAB_CASES`, or any case :func:`parse_case` reads (``actuator:effect@rate``, the effect
+        possibly a pair ``A+B`` on ``esa``).
     seconds : float
         Length of the run (at least 0.5 s).
     seed : int
@@ -395,11 +439,9 @@ def generate(case: str, *, seconds: float = 17.0, seed: int = 0, validation: boo
     """
     from phs.workflows.recording import Recording
 
-    if case not in LAB_CASES:
-        raise InputDataError(f"unknown lab case {case!r}; known: {', '.join(LAB_CASES)}")
+    name, effect, fs = parse_case(case)
     if not seconds >= 0.5:
         raise InputDataError(f"seconds must be at least 0.5, got {seconds}")
-    name, effect, fs = LAB_CASES[case]
     act, tr = ACTUATORS[name], truth_of(name, effect)
     t = np.arange(int(round(seconds * fs)) + 1) / fs
     fn, edges = command(name, seconds, fs, validation)
@@ -408,7 +450,7 @@ def generate(case: str, *, seconds: float = 17.0, seed: int = 0, validation: boo
     clean = simulate_truth(tr, t, U, x0, act.held_inputs, edges=edges, command_fn=fn)
     clean = {ch: clean[ch] for ch in act.channels}
     noise_std = {ch: NOISE[ch][1] * (float(np.ptp(y)) if NOISE[ch][0] == "range" else float(np.std(y))) for ch, y in clean.items()}
-    rng = np.random.default_rng([list(LAB_CASES).index(case) + 1, int(seed), int(bool(validation))])
+    rng = np.random.default_rng([_case_seed(case), int(seed), int(bool(validation))])
     noisy = {ch: y + noise_std[ch] * rng.standard_normal(len(t)) for ch, y in clean.items()}
     signals = {act.command: U, **{k: np.full(len(t), v) for k, v in act.held_inputs}, **noisy}
     split = "validation" if validation else "train"
@@ -439,12 +481,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="directory for the CSV files (created if missing)")
     ap.add_argument("--seconds", type=float, default=17.0, help="length of every recording (default 17 s)")
     ap.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    ap.add_argument("--cases", default=",".join(LAB_CASES), help="comma-separated cases (default: all)")
+    ap.add_argument("--cases", default=",".join(LAB_CASES),
+                    help="comma-separated cases (default: the listed ones; any actuator:effect@rate, see parse_case)")
     args = ap.parse_args(argv)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
-    unknown = [c for c in cases if c not in LAB_CASES]
-    if unknown:
-        ap.error(f"unknown case(s) {unknown}; known: {', '.join(LAB_CASES)}")
+    for c in cases:
+        try:
+            parse_case(c)
+        except InputDataError as err:
+            ap.error(str(err))
     files = {}
     for c in cases:
         for split, validation in (("train", False), ("validation", True)):

@@ -54,3 +54,22 @@ def test_quick_lab_benchmark_names_both_cases_and_times_the_phases():
     assert set(figures["cases"]) == {"esa:cubic_stiffness@500Hz", "msd:none@500Hz"}
     assert figures["verdict_correct"] == 1.0, {k: c["verdict"] for k, c in figures["cases"].items()}
     _check_timing(figures)
+
+
+def test_lab_pairs_are_lab_cases_of_the_random_pairs():
+    """``--lab --pairs N``: the random pairs of ``examples.concealed_effects`` as lab cases of the electrostatic
+    actuator, each at one of the lab's rates, the same for the same seed."""
+    import importlib.util
+
+    from examples import lab_protocols
+    from examples.concealed_effects import random_pairs
+
+    spec = importlib.util.spec_from_file_location("bench_diagnose", SCRIPT)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    cases = bench.lab_pairs(8, 3)
+    assert cases == bench.lab_pairs(8, 3) and cases != bench.lab_pairs(8, 4)
+    assert [c.split(":")[1].split("@")[0] for c in cases] == random_pairs(8, 3)
+    assert {lab_protocols.parse_case(c)[0] for c in cases} == {"esa"}
+    assert {lab_protocols.parse_case(c)[2] for c in cases} <= {500.0, 1000.0, 2000.0}
+    assert all(bench._is_lab(c) for c in cases) and not bench._is_lab("charge_retention")

@@ -79,11 +79,27 @@ def test_recordings_are_deterministic_and_noisy_per_split():
     assert info["free"] == ["m", "b", "a_v1", "a_v2", "A_m2"] and set(info["x0"]) == {"x", "p"}
 
 
+def test_a_pair_at_any_rate_is_a_case_of_its_own():
+    """Any ``actuator:effect@rate`` is a case (``parse_case``): a pair of effects of the electrostatic actuator's
+    truths at a rate of the lab's; it has its own noise stream, and its truth holds both effects' states."""
+    rec, info = lp.generate("esa:viscoelastic_creep+cubic_stiffness@2kHz", seconds=0.6)
+    assert len(rec) == 1201 and info["rate"] == 2000.0 and info["effect"] == "viscoelastic_creep+cubic_stiffness"
+    assert set(info["parameters"]) == {"viscoelastic_creep", "cubic_stiffness"} and info["free"] == ["k", "b", "eps", "g0", "m"]
+    assert lp.truth_of("esa", info["effect"]).system.state_names[3:] == ["ve1.z", "ve2.z"]  # the creep's arms
+    noise = rec["position"] - info["clean"]["position"]
+    assert np.std(noise) == pytest.approx(info["noise_std"]["position"], rel=0.15)  # 1201 samples: 3 sigma is 6 %
+    assert lp._case_seed(info["case"]) >= 1000 > len(lp.LAB_CASES)  # a noise stream apart from the listed cases'
+
+
 @pytest.mark.parametrize("call, words", [
     (lambda: lp.generate("esa:leakage@3kHz"), "unknown lab case 'esa:leakage@3kHz'"),
     (lambda: lp.generate("esa:cubic_stiffness@500Hz", seconds=0.1), "seconds must be at least 0.5"),
     (lambda: lp.msd_truth("hysteresis"), "unknown effect 'hysteresis' for msd"),
     (lambda: lp.command("rod", 1.0, 1000.0), "unknown actuator 'rod'"),
+    (lambda: lp.generate("esa:leakage+warp@1kHz"), "lab case 'esa:leakage+warp@1kHz': unknown effect 'warp'"),
+    (lambda: lp.generate("msd:leakage@1kHz"), "lab case 'msd:leakage@1kHz': unknown effect 'leakage' for msd"),
+    (lambda: lp.generate("esa:leakage+offset+added_mass@1kHz"), "unknown lab case"),
+    (lambda: lp.generate("esa:__import__('os')@1kHz"), "unknown lab case"),
 ])
 def test_bad_names_are_refused_in_one_line(call, words):
     with pytest.raises(InputDataError) as exc:
