@@ -54,7 +54,14 @@ def _run(monkeypatch, scores, first_round, alone=ALONE, adds=None):
 
     monkeypatch.setattr(pairs, "_on_firsts", fake)
     adds = adds or (lambda f, h: h.later_share >= 0.05)
-    out = pairs.first_for_small(FIRST, SECOND, alone, BEFORE, first_round, CANDS, None, None, adds)
+    calls = []
+
+    def fitted_alone():
+        calls.append(1)
+        return alone
+
+    out = pairs.first_for_small(FIRST, SECOND, fitted_alone, BEFORE, first_round, CANDS, None, None, adds)
+    assert len(calls) <= 1  # the second alone is fitted once at most
     return out, tried
 
 
@@ -100,8 +107,17 @@ def test_only_accepted_firsts_that_lower_no_channel_are_tried(monkeypatch):
     screened = _hyp("leakage@Q", 190.0, -40_000.0, stage="screening")
     same = _hyp("cubic_stiffness@x", 300.0, -20_000.0)  # the second's own effect
     failed = _hyp("time_delay@U", 100.0, -90_000.0, ok=False)
-    _, tried = _run(monkeypatch, {}, [FIRST, CREEP, trading, refused, screened, same, failed, OFFSET])
-    assert tried == [CREEP.label, OFFSET.label]  # largest gain over the model before the first, first
+    elsewhere = _hyp("hysteresis@x", 250.0, -30_000.0)  # the first's effect at another place: a first too
+    _, tried = _run(monkeypatch, {}, [FIRST, CREEP, trading, refused, screened, same, failed, OFFSET, elsewhere])
+    assert tried == [CREEP.label, elsewhere.label, OFFSET.label]  # largest gain over the model before the first, first
+
+
+def test_the_second_alone_is_fitted_only_for_a_pair_that_passes_the_other_tests(monkeypatch):
+    calls = []
+    monkeypatch.setattr(pairs, "_on_firsts", lambda others, *a, **k: [(CREEP, _pair(134.0, -63_000.0, 0.03), None)])
+    out = pairs.first_for_small(FIRST, SECOND, lambda: calls.append(1), BEFORE, [FIRST, CREEP], CANDS, None, None,
+                                lambda f, h: h.later_share >= 0.05)
+    assert out is None and calls == []
 
 
 def test_of_two_pairs_that_count_the_library_chooses_the_simpler_sufficient(monkeypatch):

@@ -94,15 +94,16 @@ def first_for_small(first, second, alone, before, first_round, cands, data_befor
     model before ``first``) and lowers no channel, the second's effect at the same place is fitted in full.
     A pair counts when the second adds its share beyond its first (``adds``), the pair passes the acceptance
     rule against ``first`` alone (it is better than the best single effect) lowering none of its channels,
-    and its first earns its place beside the second fitted ``alone`` (:func:`_earns`; ``None``: no such fit).
+    and its first earns its place beside the second fitted alone (:func:`_earns`; ``alone()`` gives that fit,
+    ``None`` when there is none, and is called only once a pair passed the other tests).
     The choice among the pairs that count is the library's own
     (:func:`~phs.workflows.diagnose.ranking.simplest`)."""
     others = [h for h in first_round if h is not first and h.ok and h.stage == "full" and not h.worsens
-              and _accepted(before, h) and h.augmentation.effect not in (first.augmentation.effect, second.augmentation.effect)]
+              and _accepted(before, h) and h.augmentation.effect != second.augmentation.effect]
     cand = next((c for c in cands if c.effect == second.augmentation.effect), None)
     if not others or cand is None or first.validation_rss <= 0:
         return None
-    pairs, said = [], []
+    pairs, said, second_alone = [], [], []
     others.sort(key=lambda h: -_gain(before, h))
     for h, pair, data_h in _on_firsts(others, first, second, cand, data_before, data_r, progress, label):
         if not pair.ok:
@@ -110,7 +111,9 @@ def first_for_small(first, second, alone, before, first_round, cands, data_befor
             continue
         share = adds(h, pair)
         better = pair.stage == "full" and _passes(first, pair) and not worsened(first, pair, data_h)
-        if share and better and (alone is None or _earns(pair, alone)):
+        if share and better and not second_alone:
+            second_alone.append(alone())
+        if share and better and (second_alone[0] is None or _earns(pair, second_alone[0])):
             pairs.append((h, pair, data_h))
         else:
             said.append(f"With {h.label} as its first instead, the pair "

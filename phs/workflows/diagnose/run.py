@@ -240,8 +240,11 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
             small.append(unfiltered)  # it would have been named: the verdict says why not
             if pick is None and trial is None:  # the first may have taken up part of it: another first of its round
                 before, data_b = starts[-2]
-                alone = _second_alone(_Trial(current, before, data_b, 0, {}), unfiltered, rounds[-2], progress,
-                                      f"round {round_ + 1}")
+
+                def alone(first=current, before=before, data_b=data_b, second=unfiltered, first_round=rounds[-2],
+                          label=f"round {round_ + 1}"):  # the second fitted alone against the model before the first
+                    return _second_alone(_Trial(first, before, data_b, 0, {}), second, first_round, progress, label)
+
                 other = first_for_small(current, unfiltered, alone, before, rounds[-2], cands, data_b, data_r,
                                         lambda f, h, d=data_r: _adds_share(nominal, f, h, d, noise), progress, f"round {round_ + 1}")
                 if other is not None:
