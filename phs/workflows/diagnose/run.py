@@ -458,12 +458,14 @@ def _adds_share(nominal, current, h, data, noise) -> bool:
     Examples
     --------
     >>> from types import SimpleNamespace as NS
-    >>> data = NS(validation={"y": np.array([0.0, 1.0, 0.0, 1.0])}, val_mask=np.ones(4, bool), outputs=["y"])
-    >>> nominal, current = NS(validation_rss=5.0), NS(validation_rss=2.0)   # noise floor 1.0: room 4.0
-    >>> h = NS(ok=True, stage="full", validation_rss=1.5, later_share=None)
-    >>> _adds_share(nominal, current, h, data, {"y": 0.25}), h.later_share   # 0.5 of the room's 4.0
+    >>> t = np.linspace(0, 6, 1000)
+    >>> y = np.sin(t) + np.random.default_rng(0).normal(0.0, 0.1, t.size)   # validation noise floor about 17.8
+    >>> data = NS(validation={"y": y}, val_mask=np.ones(t.size, bool), outputs=["y"])
+    >>> nominal, current = NS(validation_rss=57.8), NS(validation_rss=27.8)   # room 40
+    >>> h = NS(ok=True, stage="full", validation_rss=22.8, later_share=None)
+    >>> _adds_share(nominal, current, h, data, {"y": 0.1}), round(h.later_share, 3)   # 5 of the room's 40
     (True, 0.125)
-    >>> _adds_share(nominal, current, NS(ok=True, stage="full", validation_rss=1.9, later_share=None), data, {"y": 0.25})
+    >>> _adds_share(nominal, current, NS(ok=True, stage="full", validation_rss=26.8, later_share=None), data, {"y": 0.1})
     False
     """
     if not (h.ok and h.stage == "full"):
@@ -485,9 +487,11 @@ def _worth(nominal, current, data, noise):
     Examples
     --------
     >>> from types import SimpleNamespace as NS
-    >>> data = NS(validation={"y": np.array([0.0, 1.0, 0.0, 1.0])}, val_mask=np.ones(4, bool), outputs=["y"])
-    >>> worth = _worth(NS(validation_rss=5.0), NS(validation_rss=2.0), data, {"y": 0.25})  # noise floor 1.0
-    >>> worth(NS(validation_rss=1.5), None), worth(NS(validation_rss=1.5), NS(validation_rss=1.5))
+    >>> t = np.linspace(0, 6, 1000)
+    >>> y = np.sin(t) + np.random.default_rng(0).normal(0.0, 0.1, t.size)   # validation noise floor about 17.8
+    >>> data = NS(validation={"y": y}, val_mask=np.ones(t.size, bool), outputs=["y"])
+    >>> worth = _worth(NS(validation_rss=57.8), NS(validation_rss=27.8), data, {"y": 0.1})
+    >>> worth(NS(validation_rss=22.8), None), worth(NS(validation_rss=22.8), NS(validation_rss=22.8))
     (True, False)
     """
     base = explained_share(nominal, current, data, noise)
