@@ -114,3 +114,57 @@ def held_between_samples(values) -> tuple[bool, bool]:
     flats = flats[flats > 0]
     ambiguous = isolated < n or (len(flats) > 0 and float(np.median(flats)) < HELD_PLATEAU)
     return True, bool(ambiguous)
+
+
+ABRUPT_RATIO = 4.0
+"""A sample interval over which sampled values change abruptly (:func:`abrupt_runs`) changes by more than this many
+times the median change of the intervals around it (:data:`ABRUPT_WINDOW` on each side).  A sampled smooth signal
+changes by at most about 1.6 times its median there (a sine's slope over a window of a third of its period: the
+median of ``|cos|``), a raised-cosine edge a few samples long by at most 3 (at its first interval); a step, a held
+edge or a PRBS bit changes by far more than the flat stretches beside it (their median is 0)."""
+
+ABRUPT_WINDOW = 5
+"""Intervals on each side of an interval whose median change it is compared with (:data:`ABRUPT_RATIO`): a change
+spread over up to five consecutive intervals (a held edge that straddles a sample: two) still has flat neighbours
+for most of the window."""
+
+ABRUPT_SIZE = 0.01
+"""Smallest abrupt change, as a share of the values' range (:func:`abrupt_runs`): below it, noise on a measured
+input or its converter's steps, not a change of the command."""
+
+
+def abrupt_runs(values) -> list[tuple[int, int]]:
+    """Sample index pairs ``(s, e)``: maximal runs of consecutive intervals ``s..e-1`` over which sampled values
+    change abruptly, by more than :data:`ABRUPT_RATIO` times the median change of the
+    :data:`ABRUPT_WINDOW` intervals on each side and by more than :data:`ABRUPT_SIZE` of their range: steps, held
+    edges and PRBS bits, not a sampled smooth signal.  Where, inside such a run, the signal changed is not in
+    the samples.
+
+    Examples
+    --------
+    >>> abrupt_runs([0.0] * 8 + [1.0] * 8)                          # a step between samples 7 and 8
+    [(7, 8)]
+    >>> abrupt_runs([0.0] * 8 + [0.4, 1.0] + [1.0] * 8)             # a held edge that straddles sample 8
+    [(7, 9)]
+    >>> abrupt_runs(list(np.sin(np.arange(60) * 0.3)))              # a sampled sine
+    []
+    """
+    v = np.asarray(values, dtype=float).reshape(-1)
+    if len(v) < 3:
+        return []
+    a = np.abs(np.diff(v))
+    span = float(np.max(v) - np.min(v))
+    if span <= 0:
+        return []
+    w = ABRUPT_WINDOW
+    windows = np.lib.stride_tricks.sliding_window_view(np.pad(a, w, mode="edge"), 2 * w + 1)
+    jump = (a > ABRUPT_RATIO * np.median(windows, axis=1)) & (a > ABRUPT_SIZE * span)
+    runs, k = [], 0
+    idx = np.flatnonzero(jump)
+    while k < len(idx):
+        j = k
+        while j + 1 < len(idx) and idx[j + 1] == idx[j] + 1:
+            j += 1
+        runs.append((int(idx[k]), int(idx[j]) + 1))
+        k = j + 1
+    return runs

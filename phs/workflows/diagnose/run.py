@@ -18,6 +18,7 @@ from phs.workflows.diagnose.mismatch import _locate, _structured, noise_level
 from phs.workflows.diagnose.pairs import _earns, _whole, first_for_small, other_first
 from phs.workflows.diagnose.ranking import FAILED_FACTOR, _accepted, _gain, _pick, partial
 from phs.workflows.diagnose.refusal import refusal
+from phs.workflows.diagnose.timing import without_timing_samples
 from phs.workflows.diagnose.result import Diagnosis, _verdict
 from phs.workflows.diagnose.screening import (
     _polished,
@@ -157,7 +158,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
         print(f"diagnose {system.name}: fitting the nominal model ({', '.join(free)})", file=sys.stderr, flush=True)
     if not (weights is None or weights == "ml" or isinstance(weights, dict)):
         raise ParameterError(f"diagnose: weights must be 'ml', None or a dict of channel weights, got {weights!r}")
-    nominal, data = fit_nominal(system, data, n_jobs)
+    nominal, fitted = fit_nominal(system, data, n_jobs)
+    nominal, data = without_timing_samples(nominal, fitted)  # samples an abrupt input change's timing decides
+    left_out = int(np.sum(fitted.val_mask)) - int(np.sum(data.val_mask))
     refused = refusal(nominal, data)
     if refused is not None:  # units, signs or mappings: no effect is named on top of a model that describes nothing
         if progress:
@@ -394,6 +397,7 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                                    "for part of it.")
         verdict["dropped"] = [lab for lab, _, _ in dropped]
     verdict["explained_share"] = explained_share(nominal, final, data, noise)
+    verdict["timing_samples"] = left_out  # validation samples left out of every score (timing.timing_mask)
     verdict["residual_above_noise"] = bool(_structured(final, noise, outs) or _coloured(final_findings, final, data))
     verdict = partial(verdict)
     if found is None or not found.found:  # a library verdict (or none) against what the located mismatch points at
