@@ -129,8 +129,13 @@ spread over up to five consecutive intervals (a held edge that straddles a sampl
 for most of the window."""
 
 ABRUPT_SIZE = 0.01
-"""Smallest abrupt change, as a share of the values' range (:func:`abrupt_runs`): below it, noise on a measured
-input or its converter's steps, not a change of the command."""
+"""Smallest abrupt change, as a share of the values' range (:func:`abrupt_runs`): below it, a converter's steps, not
+a change of the command."""
+
+ABRUPT_NOISE = 5.0
+"""Smallest abrupt change, in standard deviations of the change noise makes (``√2 σ``, ``σ`` the values' noise
+from the median of their second differences): a measured input's noise alone crosses it once in two million
+intervals."""
 
 
 def abrupt_runs(values) -> list[tuple[int, int]]:
@@ -157,8 +162,11 @@ def abrupt_runs(values) -> list[tuple[int, int]]:
     if span <= 0:
         return []
     w = ABRUPT_WINDOW
-    windows = np.lib.stride_tricks.sliding_window_view(np.pad(a, w, mode="edge"), 2 * w + 1)
-    jump = (a > ABRUPT_RATIO * np.median(windows, axis=1)) & (a > ABRUPT_SIZE * span)
+    windows = np.lib.stride_tricks.sliding_window_view(np.pad(a, w, mode="reflect" if len(a) > w else "edge"), 2 * w + 1)
+    # the noise: the median of |second differences| (steps do not move it) over that of Gaussian noise's, 0.6745 √6
+    sigma = float(np.median(np.abs(np.diff(v, 2)))) / (0.6745 * np.sqrt(6.0))
+    floor = max(ABRUPT_SIZE * span, ABRUPT_NOISE * np.sqrt(2.0) * sigma)
+    jump = (a > ABRUPT_RATIO * np.median(windows, axis=1)) & (a > floor)
     runs, k = [], 0
     idx = np.flatnonzero(jump)
     while k < len(idx):
