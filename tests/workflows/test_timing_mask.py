@@ -82,10 +82,13 @@ def test_the_halved_courses_pass_through_the_samples_and_bracket_the_line(values
 
 def _off_grid_truth(dt, n, tau, seed, noise):
     """An RC circuit (time constant ``tau``) driven by steps at times between the samples, each a ramp of 1 % of
-    a sample period; its samples with white noise of std ``noise`` (volts) and the recorded command."""
+    a sample period, in the first or last 30 % of its interval (a step near the middle is replayed nearly right by
+    the straight line, and its samples are kept: TIMING_EVIDENCE); its samples with white noise of std ``noise``
+    (volts) and the recorded command."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt
-    switch = np.sort(rng.choice(np.arange(20, n - 20), size=8, replace=False)) + rng.uniform(0.05, 0.95, 8)
+    frac = rng.uniform(0.05, 0.3, 8) + rng.choice([0.0, 0.65], 8)
+    switch = np.sort(rng.choice(np.arange(20, n - 20), size=8, replace=False)) + frac
     levels = np.cumsum(rng.choice([-1.0, 1.0], 9) * rng.uniform(0.5, 1.0, 9))  # steps of 0.5-1 V
     times, values = [0.0], [levels[0]]
     for j, k in enumerate(switch):
@@ -117,6 +120,19 @@ def test_the_mask_leaves_out_what_the_truth_replayed_from_samples_misses(seed):
     assert np.sum((y - replay)[mask] ** 2) / (mask.sum() * 1e-6) == pytest.approx(1.0, abs=0.3)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_recording_the_straight_lines_replay_loses_no_sample(seed):
+    """The same steps, but the command's course is the straight lines through its samples (a simulation's own
+    output): the model replays the samples after each step within the noise, far better than their timing would
+    allow, and they stay evidence."""
+    sys_, rec, _ = _off_grid_truth(dt=1e-3, n=1000, tau=2e-4, seed=seed, noise=1e-3)
+    u = np.asarray(rec["U"])
+    y = simulate(sys_, rec.t, u={"U": u})["v_C"] + 1e-3 * np.random.default_rng(seed).standard_normal(len(u))
+    lines = Recording.from_arrays(rec.t, {"U": u, "v_C": y})
+    data = Data(lines, lines, np.ones(len(lines), bool), None, ["v_C"], [], {}, [], None)
+    assert timing_mask(NS(system=sys_, x0=np.zeros(1)), data).all()
+
+
 def test_a_slow_response_or_a_held_input_loses_no_sample():
     """A time constant of 500 sample periods: half a period's timing moves a sample by at most a step over 1 000
     (steps of at most 1 V: 1 mV, under the √12 σ = 3.5 mV a sample may move); a command declared held (zoh)
@@ -138,9 +154,13 @@ def test_the_cap_keeps_the_largest_and_the_nominal_scores_follow_the_mask():
     sum over the samples left (recomputed from its validation course)."""
     dt, n = 1e-3, 800
     t = np.arange(n) * dt
-    u = np.where((np.arange(n) // 8) % 2 == 0, 0.0, 1.0)
+    k = np.arange(8, n - 8, 8)                       # a step every 8 samples, a fifth into its interval
+    times = np.r_[0.0, np.ravel(np.c_[(k + 0.2) * dt, (k + 0.21) * dt]), t[-1] + dt]
+    levels = (np.arange(len(k) + 1) % 2).astype(float)
+    values = np.r_[0.0, np.ravel(np.c_[levels[:-1], levels[1:]]), levels[-1]]
+    u = np.interp(t, times, values)
     sys_ = rc_circuit(R=200.0)
-    y = simulate(sys_, t, u={"U": u})["v_C"] + 1e-3 * np.random.default_rng(4).standard_normal(n)
+    y = simulate(sys_, t, u={"U": Sampled(tuple(times), tuple(values))})["v_C"] + 1e-3 * np.random.default_rng(4).standard_normal(n)
     rec = Recording.from_arrays(t, {"U": u, "v_C": y})
     data = Data(rec, rec, np.ones(n, bool), None, ["v_C"], [], {}, [], None)
     course = simulate(sys_, t, u={"U": u})["v_C"]
