@@ -253,10 +253,8 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                 if other is not None:
                     first, pick, data_r = other
                     small.pop()
-                    rounds[-2].remove(first)
-                    rounds[-2].insert(0, first)
                     hyps.append(pick)
-                    accepted[-1], current = first, first
+                    current = _first_in_place(first, rounds[-2], accepted)
         lowers = None  # what the first of a pair on trial lowers alone (_traded)
         if pick is None and trial is None and round_ + 1 < max_effects:
             pick = _traded(current, hyps)
@@ -273,11 +271,9 @@ def diagnose(system, recording, *, validation=None, free=None, outputs=None, can
                     current, data = alone, through_element(data, alone)
                 break
             if (other := other_first(trial, pick, alone, rounds[-2], cands, data_r, progress, f"round {round_ + 1}")) is not None:
-                first, pair, data_r = other  # another first makes the better pair with this second
-                rounds[-2].remove(first)
-                rounds[-2].insert(0, first)
-                hyps.append(pair)
-                accepted[-1], current, pick = first, first, pair
+                first, pick, data_r = other  # another first makes the better pair with this second
+                hyps.append(pick)
+                current = _first_in_place(first, rounds[-2], accepted)
                 trial = trial._replace(first=first, lowers=dict(first.worsens))
             pick.notes.append(f"Together with {trial.first.label}, which alone lowers {', '.join(trial.lowers)} (validation fit "
                               f"{_fits(trial.lowers)}), it raises the fit without lowering any channel's"
@@ -451,6 +447,16 @@ first value of 0.1 refused, on the next six pairs (seed 1), a concealed cubic st
 that added 0.079: the value is the round number between the largest spurious share and that one.  A next
 round runs only when what the accepted effects leave is at least this share of the nominal model's
 mismatch (no later effect could add more)."""
+
+
+def _first_in_place(first, first_round: list, accepted: list):
+    """A pair's first chosen again (:func:`~phs.workflows.diagnose.pairs.other_first`,
+    :func:`~phs.workflows.diagnose.pairs.first_for_small`) heads its round's ranking and takes the accepted
+    first's place; returned as the model the round goes on from."""
+    first_round.remove(first)
+    first_round.insert(0, first)
+    accepted[-1] = first
+    return first
 
 
 def _adds_share(nominal, current, h, data, noise) -> bool:
