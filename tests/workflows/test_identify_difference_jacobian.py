@@ -71,3 +71,23 @@ def test_a_fit_whose_sensitivities_fail_matches_the_one_with_them(monkeypatch):
     monkeypatch.setattr(sensitivities._Problem, "_jac", fail)
     without = identify(rc_circuit(R=1.6e3), rec, ["R.R"], rtol=1e-9)
     assert without.values["R.R"] == pytest.approx(with_sens.values["R.R"], rel=1e-4)
+
+
+@pytest.mark.slow  # two 17 s lab recordings integrated by scipy (about 2 min) and a diagnosis (about 2 min)
+def test_the_lab_friction_and_hysteresis_are_both_named():
+    """``esa:coulomb_friction+hysteresis@1kHz``: the friction alone lowers the current; the hysteresis that makes
+    the pair whole failed its fit in the integration with sensitivities (``CV_TOO_MUCH_WORK``) before the
+    differenced Jacobian, and the verdict was none."""
+    import importlib
+
+    from phs.workflows.diagnose import diagnose
+
+    lp = importlib.import_module("examples.lab_protocols")
+    case = "esa:coulomb_friction+hysteresis@1kHz"
+    train, info = lp.generate(case, seed=1)
+    val, _ = lp.generate(case, seed=2, validation=True)
+    act = lp.ACTUATORS["esa"]
+    d = diagnose(act.nominal(), train, validation=val, free=info["free"], x0=info["x0"], outputs=list(act.channels), n_jobs=2)
+    assert set(d.verdict["effects"]) == {"coulomb_friction", "hysteresis"}, d.summary()
+    for ch in act.channels:
+        assert d.final.validation_fit_percent[ch] >= d.nominal.validation_fit_percent[ch]
