@@ -273,8 +273,8 @@ class Controller:
         --------
         >>> from systems.examples import mass_spring_damper
         >>> ctrl = design(mass_spring_damper(), {"position": 0.5}, stiffness={"k.l": 6.0}, damping=2.0)
-        >>> round(float(ctrl.law([1.0, 0.5])[0]), 9)   # u = k q* - k_a (q - q*) - r p/m
-        0.0
+        >>> round(float(ctrl.law([0.0, 0.7])[0]), 9)   # u = k q* - k_a (q - q*) - r p/m = 2 - 6 * 0.2
+        0.8
         """
         xi = np.zeros(self.n_xi) if xi is None else np.asarray(xi, dtype=float)
         return np.asarray(self.law_function(np.asarray(x, dtype=float), xi), dtype=float).reshape(-1)
