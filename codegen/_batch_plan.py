@@ -72,7 +72,7 @@ def plan_shape(sim, t: np.ndarray, u) -> Shape:
         # check of its grid points (BatchSimulator._violations); gated, its integrator failure failed the whole
         # map call, which was bisected and every failed run simulated again alone (a design grid of the MSD HASEL
         # with 51 of 81 runs leaving the domain: 8 s became 105 s).  Inside the domain both are the same bit for bit.
-        F, layout = sim._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step, gate=False)
+        F, layout = sim._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice, r), r.max_step, gate=False)
         c = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
         r.store(U_check, r.u)
         t_off.extend(r.times[~r.on] + plan.origin)

@@ -115,15 +115,32 @@ intervals around it, not its window and both neighbours (600 intervals, at up to
 chirp).  A cubic spline's ringing from a kink decays by about 0.27 per sample: below 1e-14 after 25."""
 
 
-def _bound(w: np.ndarray, tol: np.ndarray) -> int:
-    """The step bound of one window ``w`` (points, columns): 1 unless every column is smooth to third order,
-    else the largest factor whose linear interpolation reproduces every point to within ``tol``."""
-    k = np.arange(len(w))
-    # smooth to third order: the second differences vary slowly (a sampled sine or chirp), not in
-    # spikes (the kinks of a piecewise-linear waveform table, a step, noise); a channel that
-    # follows the input's derivative (a capacitor's current) must see the kinks where they are
+def smooth_to_third_order(w: np.ndarray, tol) -> bool:
+    """Whether every column of the points ``w`` (points, columns) is smooth to third order: at least 8
+    points, whose second differences vary slowly (a sampled sine or chirp, a raised-cosine edge), not in
+    spikes (the kinks of a piecewise-linear waveform table, a step, noise): no third difference above half
+    the largest second difference (``tol``, per column, an absolute floor of ``1e-12 tol``).
+
+    Examples
+    --------
+    >>> k = np.arange(40.0)
+    >>> smooth_to_third_order(np.cos(np.pi * k / 39)[:, None], [0.02]), smooth_to_third_order(np.abs(k - 20)[:, None], [0.4])
+    (True, False)
+    """
+    w = np.asarray(w, dtype=float).reshape(len(w), -1)
+    if len(w) < 8:
+        return False
     d2, d3 = np.abs(np.diff(w, 2, axis=0)), np.abs(np.diff(w, 3, axis=0))
-    if len(w) < 8 or not np.all(d3.max(axis=0, initial=0.0) <= 0.5 * d2.max(axis=0, initial=0.0) + 1e-12 * tol):
+    return bool(np.all(d3.max(axis=0, initial=0.0) <= 0.5 * d2.max(axis=0, initial=0.0) + 1e-12 * np.asarray(tol, dtype=float)))
+
+
+def _bound(w: np.ndarray, tol: np.ndarray) -> int:
+    """The step bound of one window ``w`` (points, columns): 1 unless every column is smooth to third order
+    (:func:`smooth_to_third_order`), else the largest factor whose linear interpolation reproduces every
+    point to within ``tol``."""
+    k = np.arange(len(w))
+    # a channel that follows the input's derivative (a capacitor's current) must see the kinks where they are
+    if not smooth_to_third_order(w, tol):
         return 1
     for m in _STEP_FACTORS:
         if m >= len(w):
@@ -227,7 +244,8 @@ def _binary_lengths(n: int, window: int) -> list[tuple[int, int]]:
 
 
 def bounded_runs(runs, interpolated, rough_ends=(False, False)):
-    """Runs ``(start, step, n)`` cut into windows with their step bound ``(start, step, n, max_step)``.
+    """Runs ``(start, step, n)`` cut into windows with their step bound and interpolation
+    ``(start, step, n, max_step, local)``.
 
     ``interpolated``: the sampled inputs that enter the integrator through their interpolant on these runs.
     With such inputs, the windows of :func:`step_windows` (``rough_ends`` passed on); one window bounded by
@@ -236,16 +254,88 @@ def bounded_runs(runs, interpolated, rough_ends=(False, False)):
     their kinks, the segments' breakpoints (:meth:`phs.signals.Sampled.kinks`, :meth:`~phs.signals.Sampled.lines`),
     not through an interpolant whose features would bound the step.
 
+    ``local``: a window bounded by one interval whose points are every input's own samples, smooth to third
+    order (:func:`smooth_to_third_order`), is integrated through the cubic spline of those samples alone
+    (:func:`local_samples`) instead of the straight lines between them.  Such a window is smooth but was
+    kept to one interval by a rough neighbour (the global spline would ring into it) or by its curvature
+    (a raised-cosine edge between two holds, a chirp at a dozen samples per period); the straight lines'
+    kink at every sample would make a channel that follows the input's derivative (a capacitor's current)
+    lag by half a sample there and cost the integrator a restart of its steps at every sample.  The spline
+    of the window's own samples does not see the rough place beyond them.
+
     Examples
     --------
     >>> list(bounded_runs([(0.0, 0.5, 4)], []))
-    [(0.0, 0.5, 4, 1.0)]
+    [(0.0, 0.5, 4, 1.0, False)]
     """
     samp = list(interpolated)
     for ra, rh, rn in runs:
         if not samp or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
-            yield ra, rh, rn, 1.0
+            yield ra, rh, rn, 1.0, False
             continue
         tt = ra + rh * np.arange(rn + 1)
         for i0, i1, m in step_windows(np.column_stack([np.asarray(sg(tt), dtype=float) for sg in samp]), rough_ends=rough_ends):
-            yield ra + i0 * rh, rh, i1 - i0, float(m)
+            if m > 1:
+                yield ra + i0 * rh, rh, i1 - i0, float(m), False
+                continue
+            for j0, j1, local in _local_pieces(samp, ra + i0 * rh, rh, i1 - i0):
+                yield ra + (i0 + j0) * rh, rh, j1 - j0, 1.0, local
+
+
+def local_samples(grid, values, start: float, step: float, n: int):
+    """The samples ``(grid, values)`` that lie on the ``n + 1`` points ``start + k step`` of a run (within a
+    millionth of the step), or None when they are not exactly those points.
+
+    Examples
+    --------
+    >>> g = np.arange(10) * 0.5
+    >>> local_samples(g, g ** 2, 1.0, 0.5, 3)
+    (array([1. , 1.5, 2. , 2.5]), array([1.  , 2.25, 4.  , 6.25]))
+    >>> local_samples(g, g ** 2, 1.25, 0.5, 3) is None
+    True
+    """
+    grid = np.asarray(grid, dtype=float)
+    eps = 1e-6 * step
+    lo = int(np.searchsorted(grid, start - eps))
+    hi = int(np.searchsorted(grid, start + n * step + eps, side="right"))
+    if hi - lo != n + 1 or not np.allclose(grid[lo:hi], start + step * np.arange(n + 1), rtol=0.0, atol=eps):
+        return None
+    return grid[lo:hi], np.asarray(values, dtype=float)[lo:hi]
+
+
+LOCAL_SPLITS = 4
+"""Most kinks a window bounded by one interval is split at in search of smooth pieces (:func:`_local_pieces`): a
+smooth stretch that ends in a step (a chirp burst dropping to its rest level) keeps its spline up to the step.
+Not chosen on a measurement."""
+
+
+def _local_pieces(samp, start: float, step: float, n: int, splits: int = LOCAL_SPLITS) -> list:
+    """A window of ``n`` intervals from ``start`` bounded by one interval, as ``(i0, i1, local)`` pieces: the
+    whole window local when every input's samples on its points are all of them and smooth to third order;
+    else, while ``splits`` last, cut at its sharpest kink (the largest second difference of any input, scaled
+    by its range) into two pieces examined the same way, the kink the end of both; a piece of fewer than 8
+    points is not local."""
+    vals = [local_samples(*sg.arrays[:2], start, step, n) for sg in samp]
+    if n < 7 or any(v is None for v in vals):
+        return [(0, n, False)]
+    V = np.column_stack([v[1] for v in vals])
+    tol = _STEP_REL_TOL * np.maximum(np.ptp(V, axis=0), 1e-300)
+    if smooth_to_third_order(V, tol):
+        return [(0, n, True)]
+    if splits <= 0:
+        return [(0, n, False)]
+    k = 1 + int(np.argmax(np.max(np.abs(np.diff(V, 2, axis=0)) / tol, axis=1)))  # the sharpest kink's point
+    left = _local_pieces(samp, start, step, k, splits - 1)
+    right = _local_pieces(samp, start + k * step, step, n - k, splits - 1)
+    return _joined(left + [(k + a, k + b, loc) for a, b, loc in right])
+
+
+def _joined(pieces: list) -> list:
+    """Neighbouring pieces that are both not local, as one."""
+    out: list = []
+    for a, b, loc in pieces:
+        if out and not loc and not out[-1][2]:
+            out[-1] = (out[-1][0], b, False)
+        else:
+            out.append((a, b, loc))
+    return out

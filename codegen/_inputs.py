@@ -16,8 +16,9 @@ from numbers import Real
 import numpy as np
 import sympy as sp
 
-from codegen._interpolants import interpolation, sampled_digest, spline_values
-from phs.errors import InputDataError
+from codegen._grid import local_samples
+from codegen._interpolants import digest, interpolation, sampled_digest, spline_values
+from phs.errors import InputDataError, SimulationError
 from phs.params import TIME
 from phs.signals import Constant, Piecewise, Sampled, Signal, as_signal
 
@@ -296,16 +297,30 @@ def plan_segments(sigs, t, cuts=()):
     return segs, slots
 
 
-def run_sampled(sampled, choice) -> list:
+def run_sampled(sampled, choice, run=None) -> list:
     """The baked samples ``sampled`` (one entry per input, :func:`baked`) that a segment's ``choice`` uses:
     None for an input that enters the segment as a template (a line over one of its straight stretches too).
+    For a ``run`` (:class:`codegen._output.OutputRun`) that interpolates its sampled inputs locally, each is
+    the samples on the run's points alone with their digest and the kind ``"bspline"``
+    (:func:`codegen._grid.bounded_runs`): the integrator's interpolant is the cubic spline of those samples.
 
     Examples
     --------
     >>> run_sampled([("grid", "values"), ("grid", "values")], [None, (0, [1.0, 0.0])])
     [('grid', 'values'), None]
     """
-    return [g if c is None else None for g, c in zip(sampled, choice, strict=True)]
+    out = [g if c is None else None for g, c in zip(sampled, choice, strict=True)]
+    if run is None or not getattr(run, "local", False):
+        return out
+    return [g if g is None else _local(g, run) for g in out]
+
+
+def _local(g, run) -> tuple:
+    """The samples ``g`` (``(times, values, ...)``) on ``run``'s points, their digest and the kind ``"bspline"``."""
+    got = local_samples(g[0], g[1], run.start, run.step, run.n)
+    if got is None:  # bounded_runs made it local only where they are
+        raise SimulationError("a locally interpolated run's points are not its input's samples")
+    return (*got, digest(got) + ":local", "bspline")  # never the key of the whole signal's own interpolant
 
 
 def _on_line(lines: np.ndarray, tm: float) -> bool:

@@ -37,6 +37,7 @@ class OutputRun:
     j: np.ndarray  # (n,) index of the grid point each output time lands on (or the next one)
     on: np.ndarray  # bool (n,): the output time is a grid point
     u: np.ndarray  # (n, nu) inputs at the output times
+    local: bool = False  # its sampled inputs through the spline of their own samples here (codegen._grid.bounded_runs)
 
     def store(self, out: np.ndarray, values: np.ndarray) -> None:
         """Write the rows of ``values`` (one per output step) that fall on grid points into ``out``."""
@@ -87,7 +88,7 @@ def output_runs(t, sigs, segs, inputs, U):
         # has one of them as a straight stretch (a kink at the edge: the window there keeps one interval)
         interp = [j for j, c in enumerate(choice) if c is None]
         edges = tuple(0 <= i < len(segs) and any(segs[i][2][j] is not None for j in interp) for i in (k - 1, k + 1))
-        for ra, rh, rn, ms in bounded_runs(equal_runs(pts), [sigs[j] for j in interp], edges):
+        for ra, rh, rn, ms, local in bounded_runs(equal_runs(pts), [sigs[j] for j in interp], edges):
             times = ra + rh * np.arange(1, rn + 1)
             uu = inputs(choice, times, ms)
             j = idx[pos:pos + rn]
@@ -98,7 +99,8 @@ def output_runs(t, sigs, segs, inputs, U):
             if pos == len(idx) and ib is not None and ib < nt - 1:
                 keep[-1] = False  # b belongs to the next segment, except the final time, which has no next segment
             U[j[keep]] = uu[keep]
-            yield OutputRun(choice, ra, rh, rn, ms, times, j, on, uu)
+            # a local run's output times are its inputs' samples (bounded_runs), where the spline is the samples
+            yield OutputRun(choice, ra, rh, rn, ms, times, j, on, uu, local)
 
 
 def check_covered(runs, nt: int, what: str) -> None:

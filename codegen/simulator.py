@@ -218,8 +218,9 @@ class Simulator:
             if sampled[j] is not None:
                 grid, values = sampled[j][:2]
                 # in a smooth window a cubic spline through the same samples: without a kink at every
-                # sample CVODES steps across samples (5-15 times fewer steps on sines sampled at 1 kHz)
-                kind = interpolation(len(grid), max_step)
+                # sample CVODES steps across samples (5-15 times fewer steps on sines sampled at 1 kHz);
+                # a run's own samples name their kind (codegen._inputs.run_sampled: a local spline)
+                kind = sampled[j][3] if len(sampled[j]) > 3 else interpolation(len(grid), max_step)
                 kinds.append(kind)
                 interp = _interpolant(grid, values, kind, digests[j])
                 uexpr.append(interp(tt))
@@ -343,7 +344,7 @@ class Simulator:
                 try:  # once more from the state with its vanishing components set to zero
                     zs, qs = call_into_numpy(F, np.where(np.abs(z) < NEGLIGIBLE, 0.0, z), P, len(x), r.n, nq)
                 except RuntimeError:
-                    self._localize_failure(F, z, p, r.start, r.step, r.n, plan.slots, run_sampled(plan.sampled, r.choice),
+                    self._localize_failure(F, z, p, r.start, r.step, r.n, plan.slots, run_sampled(plan.sampled, r.choice, r),
                                            self._calls_layout(plan, r), r.choice, exc, plan.sigs, plan.origin)
             xs = zs * self.scale
             if not np.all(np.isfinite(xs)):
@@ -420,7 +421,7 @@ class Simulator:
             return hit[1]
         calls = []
         for r in plan.runs:
-            F, layout = self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step)
+            F, layout = self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice, r), r.max_step)
             calls.append((F, self._pvec(np.zeros(0), r.start, r.step, layout, r.choice)))
         while len(self._plan_calls) >= _CALLS_KEPT:
             self._plan_calls.pop(next(iter(self._plan_calls)))
@@ -428,7 +429,7 @@ class Simulator:
         return calls
 
     def _calls_layout(self, plan, r):
-        return self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice), r.max_step)[1]
+        return self._integrator(r.n, plan.slots, run_sampled(plan.sampled, r.choice, r), r.max_step)[1]
 
     def _check_done(self, done, p, origin: float = 0.0) -> None:
         """The validity domain over the output steps of the runs ``done`` (``(states, run)`` pairs) in one call."""

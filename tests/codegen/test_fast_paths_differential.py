@@ -43,6 +43,7 @@ import sympy as sp
 from hypothesis import example, given, settings
 from lab_inputs import LINEAR, LabCase, LabInput, lab_cases, model
 from scipy.integrate import solve_ivp
+from scipy.interpolate import make_interp_spline
 
 import codegen._plan as plan_module
 from codegen import Simulator
@@ -91,9 +92,10 @@ def _knots(case: LabCase) -> np.ndarray:
 
 
 def spline_runs(case: LabCase) -> dict:
-    """Per input name, the time intervals ``(a, b)`` over which the simulator integrates it through its cubic spline
-    (from the simulation's plan: runs whose step bound spans several output intervals, the input entering
-    through its interpolant)."""
+    """Per input name, the time intervals ``(a, b, course, local)`` over which the simulator integrates it through a
+    cubic spline (from the simulation's plan: runs whose step bound spans several output intervals, the input
+    entering through the spline of all its samples; and runs bounded by one interval that interpolate their own
+    samples, ``local``), with that spline as a function of time, computed here from the samples by scipy."""
     s = case.system
     sigs = input_signals(s, case.u, case.t)
     plan = plan_for(case.t, sigs)
@@ -101,23 +103,32 @@ def spline_runs(case: LabCase) -> dict:
     for r in plan.runs:
         for j, c in enumerate(r.choice):
             sg = sigs[j]
-            if c is None and isinstance(sg, Sampled) and interpolation(len(sg.arrays[0]), r.max_step) == "bspline":
+            if c is None and isinstance(sg, Sampled) and (r.local or interpolation(len(sg.arrays[0]), r.max_step) == "bspline"):
                 a = r.start + plan.origin  # the plan counts time from the grid's start
-                out[s.input_names[j]].append((a, a + r.n * r.step))
+                b = a + r.n * r.step
+                inp = case.inputs[s.input_names[j]]
+                if r.local:  # the not-a-knot cubic spline of the samples on the run's points alone
+                    keep = (inp.times >= a - 1e-9 * r.step) & (inp.times <= b + 1e-9 * r.step)
+                    assert keep.sum() == r.n + 1, "a local run's points are its input's samples"
+                    spl = make_interp_spline(inp.times[keep], inp.values[keep], k=3)
+                    course = (lambda tt, spl=spl: np.asarray(spl(np.atleast_1d(tt)), dtype=float))
+                else:
+                    course = (lambda tt, sg=inp.signal(): _spline_values(sg, np.atleast_1d(tt)))
+                out[s.input_names[j]].append((a, b, course, bool(r.local)))
     return out
 
 
-def _inside(runs, tm: float) -> bool:
-    return any(a <= tm <= b for a, b in runs)
+def _containing(runs, tm: float):
+    return next((run for run in runs if run[0] <= tm <= run[1]), None)
 
 
 def _course(case: LabCase, name: str, splined, a: float, b: float):
     """Input ``name``'s course on ``(a, b)`` as the reference integrates it: the simulator's spline over ``splined``
     intervals, else the declared course (the line between samples, or held)."""
     inp = case.inputs[name]
-    if splined and _inside(splined, 0.5 * (a + b)):
-        sg = inp.signal()
-        return lambda tt: _spline_values(sg, np.atleast_1d(tt))
+    run = _containing(splined or [], 0.5 * (a + b))
+    if run is not None:
+        return run[2]
     if inp.hold == "zoh":
         v = float(inp(a))
         return lambda tt: np.full(np.shape(np.atleast_1d(tt)), v)
@@ -244,17 +255,17 @@ def spline_departure(case: LabCase, splined: dict, per_interval: int = 16) -> tu
         if not runs:
             continue
         inp = case.inputs[name]
-        sg = inp.signal()
-        for a, b in runs:
+        for a, b, course, local in runs:
             tt = np.linspace(a, b, max(2, int(round((b - a) / (case.t[1] - case.t[0]))) * per_interval + 1))
-            dep[name] = max(dep[name], float(np.max(np.abs(_spline_values(sg, tt) - inp(tt)))))
+            dep[name] = max(dep[name], float(np.max(np.abs(course(tt) - inp(tt)))))
             d2 = np.abs(np.diff(inp.values, 2))  # d2[i]: the second difference centred on sample i + 1
             if len(d2) == 0:
                 continue
             i0, i1 = int(np.searchsorted(inp.times, a)), int(np.searchsorted(inp.times, b))
             centre = np.arange(1, len(d2) + 1)
             dist = np.maximum(np.maximum(i0 - centre, centre - i1), 0)  # samples outside the run
-            reach = np.minimum(1.0, SPLINE_DECAY ** np.maximum(dist - 3, 0))
+            # a local spline sees its own samples only; the whole recording's reaches beyond the run, fading
+            reach = (dist == 0).astype(float) if local else np.minimum(1.0, SPLINE_DECAY ** np.maximum(dist - 3, 0))
             curv[name] = max(curv[name], float(np.max(d2 * reach)))
     return dep, curv
 

@@ -147,7 +147,7 @@ class _Problem:
             window_times = t[self.window_starts] - plan.origin  # the runs count time from the grid's start
             self.segments = []
             for r in plan.runs:
-                sampled = run_sampled(plan.sampled, r.choice)
+                sampled = run_sampled(plan.sampled, r.choice, r)
                 F, layout = sim._integrator(r.n, plan.slots, sampled, r.max_step)
                 Fs, layout_s = sens._integrator(r.n, plan.slots, sampled, r.max_step)
                 tail = sim._pvec(np.zeros(0), r.start, r.step, layout, r.choice)
