@@ -34,6 +34,16 @@ jumps between them), at the diagnosis's scoring tolerance (rtol 1e-8) and at 1e-
 each against itself at rtol 1e-11 (the current's error relative to its spread: the integration's error,
 not the difference between the two interpolants of the samples).
 
+Then a lab-protocol drive (``examples.lab_protocols``, ``esa:none@1kHz``: rests, raised-cosine edges,
+held squares, a staircase, a chirp burst, a PRBS), against the truth's own outputs (scipy's integration of
+the continuous command, before noise), at rtol 1e-8 and 1e-7:
+
+* ``local``: the default: a smooth stretch kept to one interval (an edge between two holds, the ends of a
+  chirp burst) through the spline of its own samples (``codegen._grid.bounded_runs``, ``local``);
+* ``lines``: the previous rule, the straight lines between its samples there;
+
+the current's error in units of the recording's noise (its RMS and largest value over the recording).
+
     python bench/sampled_inputs.py            # 10 s simulations, median of 3 runs
     python bench/sampled_inputs.py --quick    # 2 s, one run
 
@@ -107,6 +117,7 @@ def main(argv=None) -> dict:
     simmod._STEP_FACTORS = FACTORS
     res.update(_steps(seconds, repeats))
     res.update(_mixed(2 * seconds, repeats))
+    res.update(_lab(1.7 * seconds, repeats))
     out = {"seconds_simulated": seconds, **res,
            "ratio_simulate_linear_vs_windows": round(res["linear"]["simulate_seconds"] / res["windows"]["simulate_seconds"], 2),
            "ratio_identify_linear_vs_windows": round(res["linear"]["identify_seconds"] / res["windows"]["identify_seconds"], 2),
@@ -114,7 +125,9 @@ def main(argv=None) -> dict:
            "ratio_delayed_windows_vs_kinks": round(res["steps_windows"]["ten_delayed_seconds"]
                                                    / res["steps_kinks"]["ten_delayed_seconds"], 2),
            **{f"ratio_mixed_windows_vs_pieces_rtol{r:.0e}": round(res["mixed_windows"][f"seconds_rtol{r:.0e}"]
-                                                               / res["mixed_pieces"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS}}
+                                                               / res["mixed_pieces"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS},
+           **{f"ratio_lab_lines_vs_local_rtol{r:.0e}": round(res["lab_lines"][f"seconds_rtol{r:.0e}"]
+                                                            / res["lab_local"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS}}
     print(json.dumps(out))
     return out
 
@@ -184,6 +197,42 @@ def _mixed(seconds, repeats) -> dict:
                 print(f"mixed    {rule:<8} {sec:8.3f} s at rtol {rtol:.0e}  current error {err:.2e} of its spread", flush=True)
         finally:
             Sampled.lines, simmod.FINE_WINDOW = lines, fine
+    return out
+
+
+def _lab(seconds, repeats) -> dict:
+    """The lab-protocol drive under both rules (see the module docstring)."""
+    from examples import lab_protocols
+
+    rec, info = lab_protocols.generate("esa:none@1kHz", seconds=seconds, seed=1)
+    s = lab_protocols.truth_of("esa", "none").system
+    t, U = rec.t, np.asarray(rec["U"])
+    clean, noise = info["clean"]["current"], info["noise_std"]["current"]
+
+    def run(sim):
+        return sim.run(t, u={"U": Sampled(tuple(t), tuple(U))}, x0=info["x0"])["current"]
+
+    plans = importlib.import_module("codegen._plan")._PLANS  # the plans of a grid and its inputs, kept per process
+    pieces, out = simmod._local_pieces, {}
+    for rule in ("local", "lines"):
+        plans.clear()
+        if rule == "lines":
+            simmod._local_pieces = lambda samp, start, step, n, splits=0: [(0, n, False)]
+        try:
+            out[f"lab_{rule}"] = entry = {}
+            for rtol in MIXED_RTOLS:
+                sim = Simulator(s, rtol=rtol, energy=False)
+                run(sim)  # warm-up (integrator construction)
+                y, sec = timed(lambda sim=sim: run(sim), repeats)
+                e = (y - clean) / noise
+                entry[f"seconds_rtol{rtol:.0e}"] = round(sec, 4)
+                entry[f"current_rms_error_of_noise_rtol{rtol:.0e}"] = rms = float(np.sqrt(np.mean(e**2)))
+                entry[f"current_max_error_of_noise_rtol{rtol:.0e}"] = mx = float(np.max(np.abs(e)))
+                print(f"lab      {rule:<8} {sec:8.3f} s at rtol {rtol:.0e}  current error RMS {rms:.3g}, largest {mx:.3g} of its noise",
+                      flush=True)
+        finally:
+            simmod._local_pieces = pieces
+            plans.clear()
     return out
 
 

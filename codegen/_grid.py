@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from phs.errors import InputDataError
+from phs.kinks import smooth_to_third_order
 
 STEP_WINDOW = 200  # output intervals per window of a sampled input with its own step bound
 JOINED_MAX = 64
@@ -113,25 +114,6 @@ FINE_WINDOW = 25
 next to a rough one gives up this many of its intervals: one kink or jump in a smooth input costs the few
 intervals around it, not its window and both neighbours (600 intervals, at up to 50 CVODES steps each on a
 chirp).  A cubic spline's ringing from a kink decays by about 0.27 per sample: below 1e-14 after 25."""
-
-
-def smooth_to_third_order(w: np.ndarray, tol) -> bool:
-    """Whether every column of the points ``w`` (points, columns) is smooth to third order: at least 8
-    points, whose second differences vary slowly (a sampled sine or chirp, a raised-cosine edge), not in
-    spikes (the kinks of a piecewise-linear waveform table, a step, noise): no third difference above half
-    the largest second difference (``tol``, per column, an absolute floor of ``1e-12 tol``).
-
-    Examples
-    --------
-    >>> k = np.arange(40.0)
-    >>> smooth_to_third_order(np.cos(np.pi * k / 39)[:, None], [0.02]), smooth_to_third_order(np.abs(k - 20)[:, None], [0.4])
-    (True, False)
-    """
-    w = np.asarray(w, dtype=float).reshape(len(w), -1)
-    if len(w) < 8:
-        return False
-    d2, d3 = np.abs(np.diff(w, 2, axis=0)), np.abs(np.diff(w, 3, axis=0))
-    return bool(np.all(d3.max(axis=0, initial=0.0) <= 0.5 * d2.max(axis=0, initial=0.0) + 1e-12 * np.asarray(tol, dtype=float)))
 
 
 def _bound(w: np.ndarray, tol: np.ndarray) -> int:

@@ -51,6 +51,60 @@ at least this many intervals without a kink (:meth:`phs.signals.Sampled.lines`):
 interval, a restart a few, so a stretch this long is cheaper as a line, and exact."""
 
 
+CURVED_RUN = 8
+"""Fewest samples of a curved stretch (:func:`curved_stretches`): a run of samples each of which is a kink, smooth to
+third order.  Eight samples give the cubic spline of a stretch's own samples (``codegen._grid.bounded_runs``) four
+more than the four it is made of.  Not chosen on a measurement."""
+
+
+def smooth_to_third_order(w, tol) -> bool:
+    """Whether every column of the points ``w`` (points, columns) is smooth to third order: at least
+    :data:`CURVED_RUN` points, whose second differences vary slowly (a sampled sine or chirp, a raised-cosine
+    edge), not in spikes (the kinks of a piecewise-linear waveform table, a step, noise): no third difference
+    above half the largest second difference (``tol``, per column, an absolute floor of ``1e-12 tol``).
+
+    Examples
+    --------
+    >>> k = np.arange(40.0)
+    >>> smooth_to_third_order(np.cos(np.pi * k / 39)[:, None], [0.02]), smooth_to_third_order(np.abs(k - 20)[:, None], [0.4])
+    (True, False)
+    """
+    w = np.asarray(w, dtype=float).reshape(len(w), -1)
+    if len(w) < CURVED_RUN:
+        return False
+    d2, d3 = np.abs(np.diff(w, 2, axis=0)), np.abs(np.diff(w, 3, axis=0))
+    return bool(np.all(d3.max(axis=0, initial=0.0) <= 0.5 * d2.max(axis=0, initial=0.0) + 1e-12 * np.asarray(tol, dtype=float)))
+
+
+def curved_stretches(values, kinks) -> list[tuple[int, int]]:
+    """``(i0, i1)`` sample ranges (inclusive) of the stretches of at least :data:`CURVED_RUN` samples whose inner
+    samples are kinks (``kinks``: :func:`linear_kinks`; but for single samples between two kinks, where the slope
+    happened not to change: an inflection) and which are smooth to third order
+    (:func:`smooth_to_third_order`, at 1 % of the stretch's range): a raised-cosine edge between two holds, a sine
+    burst.  Samples whose kinks are few may still hold such a stretch: they are then not piecewise linear.
+
+    Examples
+    --------
+    >>> v = np.concatenate([np.zeros(10), 0.5 - 0.5 * np.cos(np.pi * np.arange(1, 20) / 20), np.ones(10)])
+    >>> curved_stretches(v, linear_kinks(v))   # the edge and a sample of each hold (its inflection is no kink)
+    [(8, 30)]
+    >>> curved_stretches([0.0, 0.0, 1.0, 1.0, 2.0, 2.0], linear_kinks([0.0, 0.0, 1.0, 1.0, 2.0, 2.0]))
+    []
+    """
+    v = np.asarray(values, dtype=float)
+    k = np.asarray(sorted(kinks), dtype=int)
+    out: list[tuple[int, int]] = []
+    if len(k) < CURVED_RUN - 2:
+        return out
+    breaks = np.nonzero(np.diff(k) > 2)[0]
+    for a, b in zip(np.concatenate([[0], breaks + 1]), np.concatenate([breaks, [len(k) - 1]]), strict=True):
+        i0, i1 = int(k[a]) - 1, int(k[b]) + 1  # the run of consecutive kinks and the samples either side
+        w = v[i0:i1 + 1].reshape(i1 + 1 - i0, -1)
+        if i1 + 1 - i0 >= CURVED_RUN and smooth_to_third_order(w, 0.01 * np.maximum(np.ptp(w, axis=0), 1e-300)):
+            out.append((i0, i1))
+    return out
+
+
 def straight_stretches(kinks, n: int) -> list[tuple[int, int]]:
     """Sample index pairs ``(a, b)``, consecutive among the ``kinks`` and the ends ``0``, ``n - 1``, at least
     :data:`LINE_RUN` intervals apart: the stretches over which ``n`` sampled values are one straight line.

@@ -24,7 +24,8 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import InputDataError
-from phs.kinks import KINK_SHARE, LINE_RUN, held_between_samples, linear_kinks, straight_stretches  # noqa: F401 - re-exported
+from phs.kinks import (  # noqa: F401 - re-exported
+    KINK_SHARE, LINE_RUN, curved_stretches, held_between_samples, linear_kinks, straight_stretches)
 from phs.params import TIME
 from phs.safe_parse import Arithmetic, Refusal, evaluate
 
@@ -422,7 +423,9 @@ class Sampled(Signal):
     def kinks(self) -> np.ndarray | None:
         """The times of the linear interpolant's kinks (:func:`linear_kinks`) when it is piecewise linear
         with few of them (at most :data:`~phs.kinks.KINK_SHARE` of the intervals, or 20): a step, staircase, square
-        wave or ramp table as sampled.  None for many kinks (a sine, noise) and for held samples.
+        wave or ramp table as sampled.  None for many kinks (a sine, noise), for held samples and for uniform
+        samples that hold a curved stretch among few kinks (:func:`~phs.kinks.curved_stretches`: a raised-cosine
+        edge between holds), which the simulator integrates through the spline of the stretch's own samples.
         Computed once.
 
         Examples
@@ -435,6 +438,10 @@ class Sampled(Signal):
         if "_kinks" not in self.__dict__:
             k = linear_kinks(self._v, self._t) if self.hold == "linear" else None
             few = k is not None and len(k) <= max(20, KINK_SHARE * (len(self._v) - 1))
+            # a curved stretch (a smooth edge, a sine burst: a kink at every sample) is not piecewise linear: through
+            # the spline of its own samples, not a restart at each (codegen._grid.bounded_runs)
+            h = np.diff(self._t)
+            few = few and not (len(h) and np.ptp(h) <= 1e-6 * np.mean(h) and curved_stretches(self._v, k))
             object.__setattr__(self, "_kinks", self._t[k] if few else None)
         return self.__dict__["_kinks"]
 

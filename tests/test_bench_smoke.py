@@ -40,3 +40,7 @@ def test_sampled_inputs_benchmark_windows_are_closer_to_the_signal():
     # a piecewise-linear drive: restarts at its kinks follow the tight run at least as well as the windows
     assert figures["steps_kinks"]["current_error_of_spread"] <= figures["steps_windows"]["current_error_of_spread"]
     assert figures["steps_kinks"]["current_error_of_spread"] < 1e-3
+    # a lab-protocol drive: the local splines follow the truth's current at least as well as the straight lines
+    for rtol in ("1e-08", "1e-07"):
+        assert (figures["lab_local"][f"current_rms_error_of_noise_rtol{rtol}"]
+                <= figures["lab_lines"][f"current_rms_error_of_noise_rtol{rtol}"])
