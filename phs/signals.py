@@ -24,8 +24,7 @@ import numpy as np
 import sympy as sp
 
 from phs.errors import InputDataError
-from phs.kinks import (  # noqa: F401 - re-exported
-    KINK_SHARE, LINE_RUN, curved_stretches, held_between_samples, linear_kinks, straight_stretches)
+from phs.kinks import KINK_SHARE, LINE_RUN, curved_stretches, held_between_samples, linear_kinks, straight_stretches  # noqa: F401 - re-exported
 from phs.params import TIME
 from phs.safe_parse import Arithmetic, Refusal, evaluate
 
@@ -438,8 +437,7 @@ class Sampled(Signal):
         if "_kinks" not in self.__dict__:
             k = linear_kinks(self._v, self._t) if self.hold == "linear" else None
             few = k is not None and len(k) <= max(20, KINK_SHARE * (len(self._v) - 1))
-            # a curved stretch (a smooth edge, a sine burst: a kink at every sample) is not piecewise linear: through
-            # the spline of its own samples, not a restart at each (codegen._grid.bounded_runs)
+            # a curved stretch (a kink at every sample of a smooth edge) is not piecewise linear (codegen._grid.bounded_runs)
             h = np.diff(self._t)
             few = few and not (len(h) and np.ptp(h) <= 1e-6 * np.mean(h) and curved_stretches(self._v, k))
             object.__setattr__(self, "_kinks", self._t[k] if few else None)

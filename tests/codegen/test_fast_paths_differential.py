@@ -111,11 +111,19 @@ def spline_runs(case: LabCase) -> dict:
                     keep = (inp.times >= a - 1e-9 * r.step) & (inp.times <= b + 1e-9 * r.step)
                     assert keep.sum() == r.n + 1, "a local run's points are its input's samples"
                     spl = make_interp_spline(inp.times[keep], inp.values[keep], k=3)
-                    course = (lambda tt, spl=spl: np.asarray(spl(np.atleast_1d(tt)), dtype=float))
+                    course = functools.partial(_scipy_course, spl)
                 else:
-                    course = (lambda tt, sg=inp.signal(): _spline_values(sg, np.atleast_1d(tt)))
+                    course = functools.partial(_whole_course, inp.signal())
                 out[s.input_names[j]].append((a, b, course, bool(r.local)))
     return out
+
+
+def _scipy_course(spl, tt):
+    return np.asarray(spl(np.atleast_1d(tt)), dtype=float)
+
+
+def _whole_course(sg, tt):
+    return _spline_values(sg, np.atleast_1d(tt))
 
 
 def _containing(runs, tm: float):

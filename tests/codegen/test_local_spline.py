@@ -85,7 +85,7 @@ def test_a_local_piece_never_holds_a_kink_in_its_interior(n, f, phase, noise, st
     runs = list(bounded_runs([(0.0, 1e-2, n)], [sg], (False, False)))
     assert sum(r[2] for r in runs) == n
     ends = [0]
-    for a, h, m, ms, local in runs:
+    for a, h, m, _ms, local in runs:
         assert abs(a - ends[-1] * h) < 1e-9
         ends.append(ends[-1] + m)
         if local:
@@ -126,3 +126,37 @@ def test_the_local_spline_is_the_integrators_course(rtol):
     # the charge's scale is C times the command's 1 V: a hundred times the simulator's tolerance, and 1e-9 of it;
     # the straight lines' course differs from the spline's by about 1e-4 of it here (a test that can fail)
     assert np.max(np.abs(res[sys_.state_names[0]] - sol.y[0])) <= (100 * rtol + 1e-9) * 1e-5
+
+
+def test_few_kinks_with_a_curved_stretch_are_not_piecewise_linear():
+    # a 3 s drive of holds joined by raised-cosine edges has kinks at 4 % of its samples (few), but every sample of
+    # an edge is one: it enters through the edges' own splines, not as a restart at every sample
+    t = np.arange(0.0, 3.0, 1e-3)
+    u, _ = _edges(t, 16.0, 0.04, [0.5, 1.3, 2.1])
+    sg = Sampled(tuple(t), tuple(u), hold="linear")
+    assert sg.kinks() is None and len(sg.lines()) >= 3
+    plan = plan_for(t, [sg])
+    assert sum(r.n for r in plan.runs if r.local) >= 3 * 39
+    # held edges (a square wave as sampled) and a ramp table stay piecewise linear
+    square = np.where((t % 0.5) < 0.25, 1.0, -1.0)
+    ramps = np.interp(t, [0.0, 0.7, 1.1, 2.0, 3.0], [0.0, 2.0, -1.0, -1.0, 0.5])
+    for v in (square, ramps):
+        assert Sampled(tuple(t), tuple(v), hold="linear").kinks() is not None
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(n_breaks=st.integers(1, 60), seed=st.integers(0, 10_000), held=st.booleans())
+def test_a_piecewise_linear_table_holds_no_curved_stretch(n_breaks, seed, held):
+    # breakpoints of a ramp table (or the edges of held levels) at random samples, of random levels: however close
+    # together they fall, their kinks never make a stretch smooth to third order
+    from phs.kinks import curved_stretches, linear_kinks
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    at = np.sort(rng.choice(np.arange(1, n - 1), size=min(n_breaks, n - 2), replace=False))
+    levels = rng.uniform(-1.0, 1.0, size=len(at) + 2)
+    if held:
+        v = levels[np.searchsorted(at, np.arange(n), side="right")]
+    else:
+        v = np.interp(np.arange(n), np.concatenate([[0], at, [n - 1]]), levels)
+    assert curved_stretches(v, linear_kinks(v)) == []
