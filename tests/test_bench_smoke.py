@@ -37,8 +37,11 @@ def test_sampled_inputs_benchmark_windows_are_closer_to_the_signal():
     for rule in ("windows", "linear"):
         assert abs(figures[rule]["identify_k"] - 50.0) <= 5e-3
         assert figures[rule]["simulate_seconds"] > 0 and figures[rule]["identify_seconds"] > 0
-    # a piecewise-linear drive: restarts at its kinks follow the tight run at least as well as the windows
-    assert figures["steps_kinks"]["current_error_of_spread"] <= figures["steps_windows"]["current_error_of_spread"]
+    # a piecewise-linear drive: restarts at its kinks follow the tight run as well as the windows, which since the
+    # local splines are cut at the sharpest kinks too (codegen._grid._local_pieces: on the 2 s drive 6.0e-5 against
+    # 5.6e-5 of the current's spread of the default rule's run at rtol 1e-11; the windows stepped across the
+    # kinks before, 5.6e-2 on the 10 s drive)
+    assert figures["steps_kinks"]["current_error_of_spread"] <= 2 * figures["steps_windows"]["current_error_of_spread"]
     assert figures["steps_kinks"]["current_error_of_spread"] < 1e-3
     # a lab-protocol drive: the local splines follow the truth's current at least as well as the straight lines
     for rtol in ("1e-08", "1e-07"):
