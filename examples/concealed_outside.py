@@ -49,14 +49,15 @@ flexible_mode
 
 ``size`` -> 0 gives the nominal actuator in every case.  Between samples the command is read as the
 recordings declare it (``holds={"U": "linear"}``) and as the framework's simulator reads such an
-input (:func:`reading`): a straight line between the kinks of a piecewise-linear command (the
-training runs), and where the samples hold a sine or a chirp (the validation runs) the lines over
-their straight stretches, the cubic not-a-knot spline through every sample over the windows smooth
-enough for long steps (:func:`codegen._grid.step_windows`), the line between samples elsewhere.
-Read otherwise (a line everywhere), the current of the validation run's first cycle would differ from
-the framework's reading by up to 2.0e-3 of its range, five times its noise std, where the chirp
-reaches 30 Hz (half a sample of delay), and the position by 8.4e-4 of its range: an error of the
-reading, not of the physics.
+input (:func:`reading`, from the simulator's plan): a straight line between the kinks of a
+piecewise-linear command (the training runs), and where the samples hold a sine or a chirp (the
+validation runs) the lines over their straight stretches, the cubic not-a-knot spline through every
+sample over the windows smooth enough for long steps (:func:`codegen._grid.step_windows`), the spline
+of a window's own samples where it is smooth but bounded to one sample interval, the line between
+samples elsewhere.  Read otherwise (a line everywhere), the current of the validation run's first cycle
+would differ from the framework's reading by up to 2.0e-3 of its range, five times its noise std, where
+the chirp reaches 30 Hz (half a sample of delay), and the position by 8.4e-4 of its range: an error of
+the reading, not of the physics.
 
 Measured with ``python examples/concealed_outside.py`` (20 s runs, seed 0, each case on its program; the nominal model
 refitted on the training run, free ``k, b, eps``, with :func:`phs.workflows.identify.identify`):
@@ -235,15 +236,15 @@ def command(effect: str, seconds: float, validation: bool = False) -> tuple[np.n
 # -- the command between samples -----------------------------------------------------------------------------------------
 def reading(t, U) -> list[tuple[int, int, str]]:
     """How the command is read between samples: pieces ``(i0, i1, kind)`` over sample indices, ``kind``
-    ``"line"`` (the straight line from sample ``i0`` to ``i1``, no kink between) or ``"spline"`` (the cubic
-    not-a-knot spline through every sample, smooth across the piece).
+    ``"line"`` (the straight line from sample ``i0`` to ``i1``, no kink between), ``"spline"`` (the cubic
+    not-a-knot spline through every sample of the command, smooth across the piece) or ``"local"`` (the cubic
+    not-a-knot spline through the piece's own samples ``i0 .. i1`` alone).
 
-    As the framework's simulator reads a sampled input declared linear: lines between the kinks of a
-    piecewise-linear command with few kinks (:meth:`phs.signals.Sampled.kinks`); else lines over its straight
-    stretches (:meth:`~phs.signals.Sampled.lines`) and between them the windows of
-    :func:`codegen._grid.step_windows` (run from stretch to stretch, with a straight neighbour counted as a
-    rough end), the spline where a window allows steps of several samples and the line from sample to
-    sample where it does not.
+    As the framework's simulator reads a sampled input declared linear, taken from its plan
+    (:func:`codegen._plan.plan_for`): where a run lets the step span several samples the spline of all
+    samples, where a run bounded by one interval is smooth on its own samples their local spline
+    (:func:`codegen._grid.bounded_runs`), elsewhere the line between samples, one line across samples that
+    lie on it (a hold, a ramp between kinks).
 
     Examples
     --------
@@ -252,39 +253,37 @@ def reading(t, U) -> list[tuple[int, int, str]]:
     [(0, 1, 'line'), (1, 199, 'line')]
     >>> t, U = program("none", 3.0, validation=True)
     >>> sorted({k for _, _, k in reading(t, U)})
-    ['line', 'spline']
+    ['line', 'local', 'spline']
     """
-    from codegen._grid import step_windows
+    from codegen._interpolants import interpolation
+    from codegen._plan import plan_for
     from phs.signals import Sampled
 
     t, U = np.asarray(t, dtype=float), np.asarray(U, dtype=float)
-    sg = Sampled(tuple(t), tuple(U))
-    n = len(t)
-    kinks = sg.kinks()
-    if kinks is not None:
-        idx = sorted({0, n - 1} | {int(i) for i in np.searchsorted(t, np.asarray(kinks, dtype=float) - 1e-12)})
-        return [(a, b, "line") for a, b in zip(idx[:-1], idx[1:]) if b > a]
-    lines = np.searchsorted(t, sg.lines() - 1e-12).astype(int).reshape(-1, 2)
-    edges = sorted({0, n - 1} | set(lines.ravel().tolist()))
-    segs = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        mid = 0.5 * (a + b)
-        segs.append((a, b, bool(np.any((lines[:, 0] <= mid) & (mid <= lines[:, 1])))))
+    plan = plan_for(t, [Sampled(tuple(t), tuple(U))])
+    tol = 1e-9 * (float(np.max(np.abs(U))) + 1e-300)  # a sample on the line of its neighbours, to rounding
+    rel = t - plan.origin
     out: list[tuple[int, int, str]] = []
-    for k, (a, b, straight) in enumerate(segs):
-        if straight:
-            out.append((a, b, "line"))
-            continue
-        rough = (k > 0 and segs[k - 1][2], k + 1 < len(segs) and segs[k + 1][2])
-        for i0, i1, m in step_windows(U[a:b + 1], rough_ends=rough):
-            if m > 1 and n >= 8:
-                if out and out[-1][2] == "spline" and out[-1][1] == a + i0:
-                    out[-1] = (out[-1][0], a + i1, "spline")
+    for r in plan.runs:
+        i0 = int(np.searchsorted(rel, r.start - 1e-9 * r.step))
+        i1 = int(np.searchsorted(rel, r.start + r.n * r.step - 1e-9 * r.step))
+        if r.choice[0] is None and r.local:
+            out.append((i0, i1, "local"))
+        elif r.choice[0] is None and interpolation(len(t), r.max_step) == "bspline":
+            out.append((i0, i1, "spline"))
+        else:
+            for j in range(i0, i1):
+                if out and out[-1][2] == "line" and out[-1][1] == j and _on_line(t, U, out[-1][0], j, j + 1, tol):
+                    out[-1] = (out[-1][0], j + 1, "line")
                 else:
-                    out.append((a + i0, a + i1, "spline"))
-            else:
-                out += [(j, j + 1, "line") for j in range(a + i0, a + i1)]
+                    out.append((j, j + 1, "line"))
     return out
+
+
+def _on_line(t, U, i0: int, j: int, i1: int, tol: float) -> bool:
+    """Whether sample ``j`` lies on the straight line from sample ``i0`` to sample ``i1`` (within ``tol``)."""
+    u = U[i0] + (U[i1] - U[i0]) * (t[j] - t[i0]) / (t[i1] - t[i0])
+    return bool(abs(u - U[j]) <= tol)
 
 
 # -- the truths' equations -----------------------------------------------------------------------------------------------
@@ -376,8 +375,10 @@ def simulate(effect: str, t, U, size: float = 1.0) -> dict:
             def u_at(tt, ua=ua, slope=slope, a=a):
                 return ua + slope * (tt - a)
         else:
-            def u_at(tt):
-                return float(spline(tt))
+            course = spline if kind == "spline" else make_interp_spline(t[i0:i1 + 1], U[i0:i1 + 1], k=3)
+
+            def u_at(tt, course=course):
+                return float(course(tt))
         sol = solve_ivp(lambda tt, zz: f(tt, zz, u_at(tt)), (a, b), z, method="LSODA", t_eval=t[i0 + 1:i1 + 1], rtol=RTOL,
                         atol=atol, jac=lambda tt, zz: jac(tt, zz, u_at(tt)))
         if not sol.success or sol.y.shape[1] != i1 - i0:
