@@ -57,7 +57,8 @@ times that; the 8384 unknowns of a 128-state rod would take days.  Larger design
 any symbolic work (:func:`codegen.idapbc.shaping.desired_structure`)."""
 
 PDE_SECONDS = 10.0
-"""Time allowed to ``pdsolve`` and the verification of its solution (enforced in the main thread)."""
+"""Time allowed to ``pdsolve`` and the verification of its solution: seconds of this process's own CPU time
+(enforced in the main thread), so that what the design solves how does not depend on the machine's load."""
 
 
 class _Timeout(Exception):
@@ -65,7 +66,8 @@ class _Timeout(Exception):
 
 
 def _limited(fn, seconds: float):
-    """``fn()`` with a wall-clock limit (SIGALRM in the main thread; elsewhere without a limit)."""
+    """``fn()`` with a limit on the process's user CPU time (SIGVTALRM in the main thread; elsewhere without a
+    limit): sympy's work is pure Python, which the virtual timer counts while other processes' load does not."""
     import signal
     import threading
 
@@ -75,13 +77,13 @@ def _limited(fn, seconds: float):
     def handler(signum, frame):
         raise _Timeout()
 
-    old = signal.signal(signal.SIGALRM, handler)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    old = signal.signal(signal.SIGVTALRM, handler)
+    signal.setitimer(signal.ITIMER_VIRTUAL, seconds)
     try:
         return fn()
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
+        signal.setitimer(signal.ITIMER_VIRTUAL, 0)
+        signal.signal(signal.SIGVTALRM, old)
 
 
 @dataclass
