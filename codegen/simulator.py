@@ -240,10 +240,13 @@ class Simulator:
         uu = ca.vertcat(*uexpr) if nu else ca.SX(0, 1)
         x = z * self.scale
         subs_in = [sx["x"], sx["u"], sx["p"]]
-        xdot, supplied, dissipated, dparts, conditions = ca.substitute(
-            [sx["xdot"], sx["supplied"], sx["dissipated"], sx["dissipators"], sx["conditions"]], subs_in, [x, uu, pp]
+        # gated: CVODES stops outside the domain; gated once per model in its own states (the scaled states'
+        # Jacobian has the same sparsity), then substituted like the rest: the same expression, built once
+        rhs = self._gated_rhs() if gate else sx["xdot"]
+        xdot, supplied, dissipated, dparts = ca.substitute(
+            [rhs, sx["supplied"], sx["dissipated"], sx["dissipators"]], subs_in, [x, uu, pp]
         )
-        ode = h * (gated(xdot, conditions, z) if gate else xdot) / self.scale  # gated: CVODES stops outside the domain
+        ode = h * xdot / self.scale
         # dense: a lossless model's dissipated power is a structural zero, which CVODES refuses as a sparse output
         quad = ca.densify(h * ca.vertcat(supplied, dissipated, dparts)) if self.energy else ca.SX(0, 1)
         P = ca.vertcat(pp, a, h, *extra)
@@ -275,6 +278,14 @@ class Simulator:
                 while len(_SHARED) > SHARED_INTEGRATORS:
                     _SHARED.popitem(last=False)
         return F, layout
+
+    def _gated_rhs(self):
+        """The model's right-hand side in its own states, NaN outside its validity domain (:func:`gated`)."""
+        hit = self.__dict__.get("_gated")
+        if hit is None:
+            sx = self.f.sx
+            hit = self._gated = gated(sx["xdot"], sx["conditions"], sx["x"])
+        return hit
 
     def _shared_key(self, key) -> tuple | None:
         """The key of integrator ``key`` among those every simulator of this thread shares (None for compiled
