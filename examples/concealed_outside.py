@@ -67,9 +67,9 @@ variance), ``noise`` the noise-free truth's own validation RSS in those units:
 
 | case | nominal refit, training | nominal refit, validation | noise-limited, validation | gain | noise | gain / noise |
 | --- | --- | --- | --- | ---: | ---: | ---: |
-| second_mode | 86.2 / 81.9 | 83.0 / 81.8 | 90.5 / 97.0 | 1042.5 | 199.7 | 5.22 |
-| stiffness_drift | 83.0 / 96.5 | 81.4 / 96.1 | 90.7 / 97.0 | 531.5 | 191.0 | 2.78 |
-| current_limit | 83.0 / 64.1 | 83.6 / 87.6 | 91.8 / 97.0 | 698.0 | 151.0 | 4.62 |
+| second_mode | 86.2 / 81.9 | 83.0 / 81.8 | 90.5 / 97.0 | 1042.6 | 199.9 | 5.22 |
+| stiffness_drift | 83.0 / 96.5 | 81.4 / 96.1 | 90.7 / 97.0 | 531.6 | 191.1 | 2.78 |
+| current_limit | 83.0 / 64.1 | 83.6 / 87.6 | 91.8 / 97.0 | 698.9 | 151.0 | 4.63 |
 | flexible_mode | 79.6 / 84.4 | 66.4 / 84.0 | 92.7 / 97.0 | 2649.7 | 123.2 | 21.50 |
 
 Measured the same way, the novel cases' gain over their noise is 0.99 (fringe_field), 17.9
