@@ -11,6 +11,22 @@ import sympy as sp
 
 from phs.errors import ModelError, ParameterError, ParameterRangeWarning
 
+RANGE_ROUNDING = 4e-16
+"""Relative slack of the range checks: a bound computed from a value (``10 * 1e-6`` is ``9.999999999999999e-06``)
+holds that value's own rounding, and a value a user typed as the bound is inside it."""
+
+
+def within(v: float, lo: float, hi: float) -> bool:
+    """Whether ``v`` lies in ``[lo, hi]``, each bound widened by its rounding (:data:`RANGE_ROUNDING`).
+
+    Examples
+    --------
+    >>> within(1e-5, 1e-7, 10 * 1e-6), within(1.001e-5, 1e-7, 10 * 1e-6)
+    (True, False)
+    """
+    return lo - RANGE_ROUNDING * abs(lo) <= v <= hi + RANGE_ROUNDING * abs(hi)
+
+
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
 
 
@@ -113,7 +129,7 @@ class Param:
         object.__setattr__(self, "range", (lo, hi))
         if self.positive and self.value is not None and not self.value > 0:
             raise ModelError(f"parameter {self.name!r} is declared positive but its value is {self.value:g}")
-        if self.value is not None and not lo <= self.value <= hi:
+        if self.value is not None and not within(self.value, lo, hi):
             raise ParameterError(f"parameter {self.name!r} = {self.value:g} [{self.unit}] is outside its declared range "
                                  f"[{lo:g}, {hi:g}]")
 
@@ -154,7 +170,7 @@ class Param:
         if self.positive and not v > 0:
             raise ParameterError(f"parameter {self.name!r} [{self.unit}] is declared positive; value {v:g} refused{where}")
         lo, hi = self.range
-        if not lo <= v <= hi:
+        if not within(v, lo, hi):
             warnings.warn(f"parameter {self.name!r} = {v:g} is outside its declared range [{lo:g}, {hi:g}]{where}",
                           ParameterRangeWarning, stacklevel=3)
         return v
