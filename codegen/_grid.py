@@ -243,7 +243,9 @@ def bounded_runs(runs, interpolated, rough_ends=(False, False)):
     (a raised-cosine edge between two holds, a chirp at a dozen samples per period); the straight lines'
     kink at every sample would make a channel that follows the input's derivative (a capacitor's current)
     lag by half a sample there and cost the integrator a restart of its steps at every sample.  The spline
-    of the window's own samples does not see the rough place beyond them.
+    of the window's own samples does not see the rough place beyond them.  ``local`` is False, or the span
+    ``(start, step, n)`` whose samples (:func:`local_samples`) the spline goes through: the window's own, or for
+    a partial step beside such a window (a breakpoint off the grid), the neighbour's.
 
     Examples
     --------
@@ -251,38 +253,69 @@ def bounded_runs(runs, interpolated, rough_ends=(False, False)):
     [(0.0, 0.5, 4, 1.0, False)]
     """
     samp = list(interpolated)
+    out = []
     for ra, rh, rn in runs:
         if not samp or any(float(np.min(np.diff(sg.arrays[0]))) < rh * (1 - 1e-9) for sg in samp):
-            yield ra, rh, rn, 1.0, False
+            out.append((ra, rh, rn, 1.0, False))
             continue
         tt = ra + rh * np.arange(rn + 1)
         for i0, i1, m in step_windows(np.column_stack([np.asarray(sg(tt), dtype=float) for sg in samp]), rough_ends=rough_ends):
             if m > 1:
-                yield ra + i0 * rh, rh, i1 - i0, float(m), False
+                out.append((ra + i0 * rh, rh, i1 - i0, float(m), False))
                 continue
-            for j0, j1, local in _local_pieces(samp, ra + i0 * rh, rh, i1 - i0):
-                yield ra + (i0 + j0) * rh, rh, j1 - j0, 1.0, local
+            out += [(ra + (i0 + j0) * rh, rh, j1 - j0, 1.0, local) for j0, j1, local in _local_pieces(samp, ra + i0 * rh, rh, i1 - i0)]
+    yield from _partial_steps_joined(out, samp)
+
+
+def _partial_steps_joined(windows: list, samp) -> list:
+    """``windows`` with each single step shorter than an output interval (from a breakpoint off the grid to the
+    next grid point, or back) that lies beside a local window and within the samples of its spline made local
+    with that window's span: the same spline on both sides (a command delayed by a fraction of a sample has its
+    kinks, where the segments end, between the grid points; read as a straight line there beside the spline,
+    the course would jump where the two meet)."""
+    out = list(windows)
+    for i, (ra, rh, rn, ms, local) in enumerate(out):
+        if local or rn != 1:
+            continue
+        for nb in (i - 1, i + 1):
+            span = out[nb][4] if 0 <= nb < len(out) else False
+            if not span or not rh < span[1] * (1 - 1e-9):
+                continue
+            inside = [local_samples(*sg.arrays[:2], *span) for sg in samp]
+            if all(v is not None and v[0][0] - 1e-9 * rh <= ra and ra + rh <= v[0][-1] + 1e-9 * rh for v in inside):
+                out[i] = (ra, rh, rn, ms, span)
+                break
+    return out
 
 
 def local_samples(grid, values, start: float, step: float, n: int):
-    """The samples ``(grid, values)`` that lie on the ``n + 1`` points ``start + k step`` of a run (within a
-    millionth of the step), or None when they are not exactly those points.
+    """The samples ``(grid, values)`` of a run of ``n`` intervals ``step`` from ``start`` that its local spline
+    goes through: the ``n + 1`` samples on its points (within a millionth of the step), or, for samples as
+    evenly spaced but off the points by a constant phase (a command delayed by a fraction of a sample), the
+    ``n + 2`` that cover it (the last at or before its start to the first at or after its end); None for
+    samples spaced otherwise.
 
     Examples
     --------
     >>> g = np.arange(10) * 0.5
     >>> local_samples(g, g ** 2, 1.0, 0.5, 3)
     (array([1. , 1.5, 2. , 2.5]), array([1.  , 2.25, 4.  , 6.25]))
-    >>> local_samples(g, g ** 2, 1.25, 0.5, 3) is None
+    >>> local_samples(g, g ** 2, 1.25, 0.5, 3)[0]
+    array([1. , 1.5, 2. , 2.5, 3. ])
+    >>> local_samples(g ** 1.5, g, 1.0, 0.5, 3) is None
     True
     """
     grid = np.asarray(grid, dtype=float)
     eps = 1e-6 * step
-    lo = int(np.searchsorted(grid, start - eps))
-    hi = int(np.searchsorted(grid, start + n * step + eps, side="right"))
-    if hi - lo != n + 1 or not np.allclose(grid[lo:hi], start + step * np.arange(n + 1), rtol=0.0, atol=eps):
+    end = start + n * step
+    lo = int(np.searchsorted(grid, start + eps, side="right")) - 1  # the last sample at or before the start
+    hi = int(np.searchsorted(grid, end - eps, side="left"))  # the first at or after the end
+    if lo < 0 or hi >= len(grid):
         return None
-    return grid[lo:hi], np.asarray(values, dtype=float)[lo:hi]
+    on = abs(grid[lo] - start) <= eps  # on the run's points: n + 1 of them; else n + 2 around them
+    if hi - lo != (n if on else n + 1) or not np.allclose(np.diff(grid[lo:hi + 1]), step, rtol=0.0, atol=eps):
+        return None
+    return grid[lo:hi + 1], np.asarray(values, dtype=float)[lo:hi + 1]
 
 
 LOCAL_SPLITS = 4
@@ -293,23 +326,31 @@ Not chosen on a measurement."""
 
 def _local_pieces(samp, start: float, step: float, n: int, splits: int = LOCAL_SPLITS) -> list:
     """A window of ``n`` intervals from ``start`` bounded by one interval, as ``(i0, i1, local)`` pieces: the
-    whole window local when every input's samples on its points are all of them and smooth to third order;
-    else, while ``splits`` last, cut at its sharpest kink (the largest second difference of any input, scaled
-    by its range) into two pieces examined the same way, the kink the end of both; a piece of fewer than 8
-    points is not local."""
+    whole window local when every input's samples on its points (or evenly spaced around them:
+    :func:`local_samples`) are all of them and smooth to third order; else, while ``splits`` last, cut at its
+    sharpest kink (the largest second difference of any input, scaled by its range) into two pieces examined
+    the same way, the kink the end of both (a kink between two points: the interval that holds it taken by
+    the straight lines); a piece of fewer than 8 points is not local.  A local piece's ``local`` is the span
+    ``(start, step, n)`` whose samples its spline goes through (:func:`local_samples`)."""
+    if n <= 0:
+        return []
     vals = [local_samples(*sg.arrays[:2], start, step, n) for sg in samp]
-    if n < 7 or any(v is None for v in vals):
+    if n < 7 or any(v is None for v in vals) or len({len(v[1]) for v in vals}) > 1:
         return [(0, n, False)]
     V = np.column_stack([v[1] for v in vals])
     tol = _STEP_REL_TOL * np.maximum(np.ptp(V, axis=0), 1e-300)
     if smooth_to_third_order(V, tol):
-        return [(0, n, True)]
+        return [(0, n, (start, step, n))]
     if splits <= 0:
         return [(0, n, False)]
-    k = 1 + int(np.argmax(np.max(np.abs(np.diff(V, 2, axis=0)) / tol, axis=1)))  # the sharpest kink's point
-    left = _local_pieces(samp, start, step, k, splits - 1)
-    right = _local_pieces(samp, start + k * step, step, n - k, splits - 1)
-    return _joined(left + [(k + a, k + b, loc) for a, b, loc in right])
+    k = 1 + int(np.argmax(np.max(np.abs(np.diff(V, 2, axis=0)) / tol, axis=1)))  # the sharpest kink's sample
+    # samples on the points: the kink is point k, the end of both pieces; samples between them (n + 2): sample k
+    # lies inside interval k - 1, which the straight lines take, the pieces either side ending at its ends
+    a, b = (k, k) if len(V) == n + 1 else (k - 1, k)
+    left = _local_pieces(samp, start, step, a, splits - 1)
+    middle = [(a, b, False)] if b > a else []
+    right = _local_pieces(samp, start + b * step, step, n - b, splits - 1)
+    return _joined(left + middle + [(b + i, b + j, loc) for i, j, loc in right])
 
 
 def _joined(pieces: list) -> list:

@@ -316,8 +316,10 @@ def run_sampled(sampled, choice, run=None) -> list:
 
 
 def _local(g, run) -> tuple:
-    """The samples ``g`` (``(times, values, ...)``) on ``run``'s points, their digest and the kind ``"bspline"``."""
-    got = local_samples(g[0], g[1], run.start, run.step, run.n)
+    """The samples ``g`` (``(times, values, ...)``) of ``run``'s local span (:func:`codegen._grid.local_samples`),
+    their digest and the kind ``"bspline"``."""
+    span = run.local if isinstance(run.local, tuple) else (run.start, run.step, run.n)
+    got = local_samples(g[0], g[1], *span)
     if got is None:  # bounded_runs made it local only where they are
         raise SimulationError("a locally interpolated run's points are not its input's samples")
     return (*got, digest(got) + ":local", "bspline")  # never the key of the whole signal's own interpolant

@@ -20,7 +20,7 @@ import dataclasses
 
 import numpy as np
 
-from codegen._grid import bounded_runs, equal_runs, snap_to_grid
+from codegen._grid import bounded_runs, equal_runs, local_samples, snap_to_grid
 from phs.errors import SimulationError
 
 
@@ -37,7 +37,7 @@ class OutputRun:
     j: np.ndarray  # (n,) index of the grid point each output time lands on (or the next one)
     on: np.ndarray  # bool (n,): the output time is a grid point
     u: np.ndarray  # (n, nu) inputs at the output times
-    local: bool = False  # its sampled inputs through the spline of their own samples here (codegen._grid.bounded_runs)
+    local: tuple | bool = False  # the span whose samples' spline its sampled inputs follow (codegen._grid.bounded_runs)
 
     def store(self, out: np.ndarray, values: np.ndarray) -> None:
         """Write the rows of ``values`` (one per output step) that fall on grid points into ``out``."""
@@ -91,6 +91,8 @@ def output_runs(t, sigs, segs, inputs, U):
         for ra, rh, rn, ms, local in bounded_runs(equal_runs(pts), [sigs[j] for j in interp], edges):
             times = ra + rh * np.arange(1, rn + 1)
             uu = inputs(choice, times, ms)
+            if local:
+                uu = _local_course(uu, [(j, sigs[j]) for j in interp], local, times)
             j = idx[pos:pos + rn]
             pos += rn
             on = j >= 0
@@ -99,8 +101,25 @@ def output_runs(t, sigs, segs, inputs, U):
             if pos == len(idx) and ib is not None and ib < nt - 1:
                 keep[-1] = False  # b belongs to the next segment, except the final time, which has no next segment
             U[j[keep]] = uu[keep]
-            # a local run's output times are its inputs' samples (bounded_runs), where the spline is the samples
+            # a local run's inputs follow the spline of the samples of its span (bounded_runs)
             yield OutputRun(choice, ra, rh, rn, ms, times, j, on, uu, local)
+
+
+def _local_course(uu, sampled, span, times):
+    """``uu`` (the inputs at a local run's output ``times``) with each sampled input ``(j, signal)`` whose samples
+    lie off the run's points (:func:`codegen._grid.local_samples`: ``n + 2`` around a span of ``n`` intervals) at
+    the value of the spline the integrator follows there, not the straight line between the samples: a
+    channel that feeds the input through (a source's current) reports the course that drove the state.  On the
+    points the samples are the spline's values and ``uu`` is kept as it is."""
+    from scipy.interpolate import make_interp_spline
+
+    out = None
+    for j, sg in sampled:
+        got = local_samples(*sg.arrays[:2], *span)
+        if got is not None and len(got[0]) == span[2] + 2:
+            out = np.array(uu, dtype=float) if out is None else out
+            out[:, j] = make_interp_spline(got[0], got[1], k=3)(times)
+    return uu if out is None else out
 
 
 def check_covered(runs, nt: int, what: str) -> None:

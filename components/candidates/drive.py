@@ -40,19 +40,25 @@ class TimeDelay(InputElement):
 
     def course(self, t, u, theta) -> tuple | None:
         """The command's samples ``tau_d`` later, its first value held before them (exact for any delay,
-        not only whole samples: the kinks of a stepping command move between the samples).
+        not only whole samples: the kinks of a stepping command move between the samples).  The held first
+        value takes samples a sampling step apart before the first, back to the recording's start: the
+        course stays evenly sampled, as the command was, and the simulator reads it as it reads the command
+        itself (a smooth stretch through the spline of its own samples, :func:`codegen._grid.local_samples`),
+        so that a delay tending to zero gives the undelayed command's response.
 
         Examples
         --------
         >>> times, values = TimeDelay().course(np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 1.0]), [0.25])
         >>> times.tolist(), values.tolist()
-        ([0.0, 0.25, 1.25, 2.25], [0.0, 0.0, 1.0, 1.0])
+        ([-0.75, 0.25, 1.25, 2.25], [0.0, 0.0, 1.0, 1.0])
         """
         tau = float(theta[0])
         if not tau > 0:
             return None
         t, u = np.asarray(t, float), np.asarray(u, float)
-        return np.concatenate([[t[0]], t + tau]), np.concatenate([[u[0]], u])
+        dt = float(t[1] - t[0]) if len(t) > 1 else tau
+        held = t[0] + tau - dt * np.arange(max(1, math.ceil(tau / dt - 1e-9)), 0, -1)  # back to the recording's start
+        return np.concatenate([held, t + tau]), np.concatenate([np.full(len(held), u[0]), u])
 
     def neutral(self, t, u) -> list[float]:
         return [0.0]

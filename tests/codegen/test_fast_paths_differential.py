@@ -107,10 +107,14 @@ def spline_runs(case: LabCase) -> dict:
                 a = r.start + plan.origin  # the plan counts time from the grid's start
                 b = a + r.n * r.step
                 inp = case.inputs[s.input_names[j]]
-                if r.local:  # the not-a-knot cubic spline of the samples on the run's points alone
-                    keep = (inp.times >= a - 1e-9 * r.step) & (inp.times <= b + 1e-9 * r.step)
-                    assert keep.sum() == r.n + 1, "a local run's points are its input's samples"
-                    spl = make_interp_spline(inp.times[keep], inp.values[keep], k=3)
+                if r.local:  # the not-a-knot cubic spline of the samples of the run's span alone: from the last
+                    # at or before its start to the first at or after its end (its points, or around them)
+                    s0, sh, sn = r.local
+                    sa, sb = s0 + plan.origin, s0 + plan.origin + sn * sh
+                    lo = np.flatnonzero(inp.times <= sa + 1e-6 * sh)[-1]
+                    hi = np.flatnonzero(inp.times >= sb - 1e-6 * sh)[0]
+                    assert hi - lo in (sn, sn + 1), "a local run's span is covered by its input's samples"
+                    spl = make_interp_spline(inp.times[lo:hi + 1], inp.values[lo:hi + 1], k=3)
                     course = functools.partial(_scipy_course, spl)
                 else:
                     course = functools.partial(_whole_course, inp.signal())
