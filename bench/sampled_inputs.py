@@ -44,6 +44,19 @@ the continuous command, before noise), at rtol 1e-8 and 1e-7:
 
 the current's error in units of the recording's noise (its RMS and largest value over the recording).
 
+Then a command delayed by a fraction of a sample (the ``time_delay`` element's course, an RC circuit with
+R C = 10 us at 1 kHz driven through raised-cosine edges; delays of 1e-7, 0.3 and 2.6 samples), the source's
+current (``U.i``, which feeds the command through) against ``C du/dt`` at ``t - tau``:
+
+* ``course``: the default (``TimeDelay.course``): the moved samples stay evenly spaced, the held first value
+  a row of samples back to the start, so the delayed command goes through the local splines as the command
+  itself does;
+* ``held``: the previous course, the first value held once at the recording's start: its first interval is
+  shorter than the others (read with today's simulator: a delay shorter than a sample then goes through
+  straight lines, a longer one through the splines of the evenly spaced samples around each edge);
+
+the largest error of the current over its peak.
+
     python bench/sampled_inputs.py            # 10 s simulations, median of 3 runs
     python bench/sampled_inputs.py --quick    # 2 s, one run
 
@@ -118,6 +131,7 @@ def main(argv=None) -> dict:
     res.update(_steps(seconds, repeats))
     res.update(_mixed(2 * seconds, repeats))
     res.update(_lab(1.7 * seconds, repeats))
+    res.update(_delayed(repeats))
     out = {"seconds_simulated": seconds, **res,
            "ratio_simulate_linear_vs_windows": round(res["linear"]["simulate_seconds"] / res["windows"]["simulate_seconds"], 2),
            "ratio_identify_linear_vs_windows": round(res["linear"]["identify_seconds"] / res["windows"]["identify_seconds"], 2),
@@ -127,7 +141,10 @@ def main(argv=None) -> dict:
            **{f"ratio_mixed_windows_vs_pieces_rtol{r:.0e}": round(res["mixed_windows"][f"seconds_rtol{r:.0e}"]
                                                                / res["mixed_pieces"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS},
            **{f"ratio_lab_lines_vs_local_rtol{r:.0e}": round(res["lab_lines"][f"seconds_rtol{r:.0e}"]
-                                                            / res["lab_local"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS}}
+                                                            / res["lab_local"][f"seconds_rtol{r:.0e}"], 2) for r in MIXED_RTOLS},
+           **{f"ratio_delayed_error_held_vs_course_{d:g}": round(res["delayed_held"][f"current_max_error_of_peak_{d:g}"]
+                                                                 / res["delayed_course"][f"current_max_error_of_peak_{d:g}"], 1)
+              for d in DELAYS}}
     print(json.dumps(out))
     return out
 
@@ -233,6 +250,55 @@ def _lab(seconds, repeats) -> dict:
         finally:
             simmod._local_pieces = pieces
             plans.clear()
+    return out
+
+
+DELAYS = (1e-7, 0.3, 2.6)
+"""Delays of :func:`_delayed`, in samples: one that tends to zero, one inside a sample, one beyond two."""
+
+
+def _edges(t, level=16.0, width=0.04, starts=(0.1, 0.3, 0.45)):
+    """Raised-cosine edges of ``width`` s between ``-level`` and ``level`` at ``starts``, held between them;
+    the command and its time derivative."""
+    u, du, sign = np.full_like(t, -level), np.zeros_like(t), 1.0
+    for a in starts:
+        s = np.clip((t - a) / width, 0.0, 1.0)
+        lo, hi = (-level, level) if sign > 0 else (level, -level)
+        u = np.where(t >= a, lo + (hi - lo) * 0.5 * (1 - np.cos(np.pi * s)), u)
+        du = np.where((t > a) & (t < a + width), (hi - lo) * 0.5 * np.pi / width * np.sin(np.pi * s), du)
+        sign = -sign
+    return u, du
+
+
+def _delayed(repeats) -> dict:
+    """The delayed command under both courses (see the module docstring)."""
+    from components.candidates import TimeDelay
+    from systems.examples import rc_circuit
+
+    R, C, dt = 100.0, 1e-7, 1e-3
+    t = np.arange(0.0, 0.6, dt)
+    u, _ = _edges(t)
+    sim = Simulator(rc_circuit(), rtol=1e-9)
+    out = {"delayed_course": {}, "delayed_held": {}}
+    for d in DELAYS:
+        tau = d * dt
+        _, du = _edges(t - tau)
+        exact = C * du
+        peak = float(np.max(np.abs(exact)))
+        times, values = TimeDelay().course(t, u, [tau])
+        first = int(np.searchsorted(times, t[0] + tau))  # the previous course: the first value held once at the start
+        courses = {"course": (times, values), "held": (np.r_[t[0], times[first:]], np.r_[values[0], values[first:]])}
+        for rule, (tt, vv) in courses.items():
+            def run(tt=tt, vv=vv):
+                res = sim.run(t, u={"U": Sampled(tuple(tt), tuple(vv), hold="linear")}, x0={"C.Q": -16.0 * C},
+                              params={"R.R": R, "C.C": C})
+                return np.asarray(res["U.i"], dtype=float)
+            run()  # warm-up (integrator construction)
+            y, sec = timed(run, repeats)
+            err = float(np.max(np.abs(y - exact)) / peak)
+            out[f"delayed_{rule}"][f"current_max_error_of_peak_{d:g}"] = err
+            out[f"delayed_{rule}"][f"seconds_{d:g}"] = round(sec, 4)
+            print(f"delayed  {rule:<8} {sec:8.3f} s at {d:g} samples  current error {err:.2e} of its peak", flush=True)
     return out
 
 
