@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from codegen import Simulator
+from phs.errors import PHSError
 from phs.workflows.diagnose.element_search import (  # noqa: F401  (_transformed, _simulate re-exported)
     PRESSED,
     REFINE_ITER,
@@ -256,14 +257,20 @@ def score(label, system, values, x0, n_params, data: Data, *, augmentation=None,
 
 
 def train_result(h: Scored, data: Data) -> SimulationResult:
-    """The full simulated training trajectory of a scored model (simulated once, then kept)."""
+    """The full simulated training trajectory of a scored model (simulated once, then kept).  Where the
+    integration at the scores' tolerance fails (a stiff state the fit's own integrations at ``data.rtol`` passed
+    through: a hysteresis far beyond its typical size), the trajectory is the one at ``data.rtol``, where the
+    training residuals of the fit were computed."""
     if h.simulated.get("train") is None:
         el = h.augmentation.element if h.augmentation is not None else None
         if el is not None and _element_key(h.augmentation) in data.carried:  # the data go through it already
             el = None
         theta = list(h.element_values.values())
         rec = _transformed(data.recording, el, h.augmentation.attached_to if el else "", theta)
-        h.simulated["train"] = _simulate(h.system, rec, h.x0)
+        try:
+            h.simulated["train"] = _simulate(h.system, rec, h.x0)
+        except PHSError:
+            h.simulated["train"] = _simulate(h.system, rec, h.x0, sim=Simulator(h.system, rtol=data.rtol, energy=False))
     return h.simulated["train"]
 
 
