@@ -51,6 +51,11 @@ CHILDREN) and ``phases``, where the wall and CPU seconds went: ``nominal fit``, 
 ``screening``, ``refits`` (joint refits, deferred and located-family refits, polish; every fit when
 ``refit_top=0``), ``discovery`` and ``other`` (the rest of the diagnosis).  The phases are timed from
 outside: the bench wraps functions of :mod:`phs.workflows.diagnose` with timers (:func:`install_clock`).
+``integrations`` counts what the time is spent integrating (:func:`install_counter`, summed over the forked
+workers): ``simulations`` (the simulator's runs: scores, element searches, locations), ``fit integrations``
+(a fit's residual, one CVODES call per segment) and ``sensitivity integrations`` (a fit's Jacobian: the same
+with a forward-sensitivity direction per free parameter), each with its ``calls``, ``samples``,
+``sample_directions`` (samples times directions) and ``seconds`` (summed over processes, like CPU seconds).
 
 ``--lab`` runs the lab-protocol recordings of :mod:`examples.lab_protocols` instead (17 s by default:
 rests, smooth-edged and held squares, staircases, chirp bursts, PRBS, at 500 Hz to 2 kHz; the
@@ -157,6 +162,95 @@ def install_clock() -> PhaseClock:
 CLOCK: PhaseClock | None = None
 
 
+INTEGRATIONS = ("simulations", "fit integrations", "sensitivity integrations")
+"""What :class:`IntegrationCounter` counts: the simulator's runs (scores, element searches, locations, the
+discovery's screens), the fits' plain integrations (a residual without its Jacobian: one CVODES call per
+segment) and their integrations with forward sensitivities (a Jacobian: one CVODES call per segment, with a
+direction per free parameter and estimated initial state)."""
+
+
+class IntegrationCounter:
+    """Calls, samples, sample-directions and seconds of the integrations (:data:`INTEGRATIONS`), summed over
+    this process and the workers it forks (counters in shared memory made before any fork; a forked worker
+    adds to them).  The seconds are summed over processes: compare them with the case's CPU seconds."""
+
+    FIELDS = ("calls", "samples", "directions", "seconds")
+
+    def __init__(self):
+        import multiprocessing as mp
+
+        self.values = mp.get_context("fork").Array("d", len(INTEGRATIONS) * len(self.FIELDS))
+        self.wrapped = []
+
+    def add(self, kind: str, samples: int, directions: int, seconds: float):
+        k = INTEGRATIONS.index(kind) * len(self.FIELDS)
+        with self.values.get_lock():
+            self.values[k] += 1
+            self.values[k + 1] += samples
+            self.values[k + 2] += samples * directions
+            self.values[k + 3] += seconds
+
+    def reset(self):
+        with self.values.get_lock():
+            for i in range(len(self.values)):
+                self.values[i] = 0.0
+
+    def read(self) -> dict:
+        """Per kind ``{"calls", "samples", "sample_directions", "seconds"}`` (seconds rounded to 0.01)."""
+        n = len(self.FIELDS)
+        with self.values.get_lock():
+            v = list(self.values)
+        return {kind: {"calls": int(v[i * n]), "samples": int(v[i * n + 1]), "sample_directions": int(v[i * n + 2]),
+                       "seconds": round(v[i * n + 3], 2)} for i, kind in enumerate(INTEGRATIONS)}
+
+
+def install_counter() -> IntegrationCounter:
+    """Count the integrations (:class:`IntegrationCounter`): wrap ``codegen.Simulator.run`` (samples: the
+    output times) and the fits' CVODES calls in :mod:`phs.workflows.identify.sensitivities` (samples: the
+    segment's output times; directions: the sensitivities' seeds).  Before any fork, so that the workers
+    inherit the wrappers and the shared counters."""
+    import importlib
+
+    import phs.workflows.identify.sensitivities as sens
+
+    simulator = importlib.import_module("codegen.simulator")  # the module (``codegen.simulator`` is also a function)
+    counter = IntegrationCounter()
+    run = simulator.Simulator.run
+    if not getattr(run, "_bench_count", False):
+        def counted_run(self, t, *a, **k):
+            t0 = time.perf_counter()
+            try:
+                return run(self, t, *a, **k)
+            finally:
+                counter.add("simulations", len(np.atleast_1d(t)), 0, time.perf_counter() - t0)
+        counted_run._bench_count = True
+        simulator.Simulator.run = counted_run
+        counter.wrapped.append("codegen.simulator.Simulator.run")
+    plain, with_sens = sens._integrate, sens._integrate_sensitivities
+    if not getattr(plain, "_bench_count", False):
+        def counted_plain(F, z0, P, nx, n):
+            t0 = time.perf_counter()
+            try:
+                return plain(F, z0, P, nx, n)
+            finally:
+                counter.add("fit integrations", n, 0, time.perf_counter() - t0)
+
+        def counted_sens(Fs, z0, S0, P, seed_p, n):
+            t0 = time.perf_counter()
+            try:
+                return with_sens(Fs, z0, S0, P, seed_p, n)
+            finally:
+                counter.add("sensitivity integrations", n, int(np.shape(seed_p)[0]), time.perf_counter() - t0)
+        counted_plain._bench_count = counted_sens._bench_count = True
+        sens._integrate, sens._integrate_sensitivities = counted_plain, counted_sens
+        counter.wrapped += ["phs.workflows.identify.sensitivities._integrate",
+                            "phs.workflows.identify.sensitivities._integrate_sensitivities"]
+    return counter
+
+
+COUNTER: IntegrationCounter | None = None
+
+
 def _is_lab(case: str) -> bool:
     """Whether ``case`` is a lab-protocol case (:func:`examples.lab_protocols.parse_case`)."""
     try:
@@ -215,12 +309,15 @@ def run_case(effect: str, seconds: float, jobs: int | None, refit_top: int = 3) 
             return d.effect == effect
     if CLOCK is not None:
         CLOCK.reset()
+    if COUNTER is not None:
+        COUNTER.reset()
     c0, t0 = cpu_seconds(), time.perf_counter()
     d = diagnose(model, train, validation=val, free=list(free), n_jobs=jobs, refit_top=refit_top, **kw)
     sec, cpu = time.perf_counter() - t0, cpu_seconds() - c0
     phases = CLOCK.split(sec, cpu) if CLOCK is not None else None
     out = {
         "seconds": round(sec, 2), "cpu_seconds": round(cpu, 2), "phases": phases,
+        "integrations": COUNTER.read() if COUNTER is not None else None,
         "diagnosis_seconds": round(d.seconds, 2), "samples": len(train),
         "hypotheses_fitted": sum(len(r) for r in d.rounds),
         "verdict": d.effect, "effects": d.verdict["effects"], "expected": effect,
@@ -250,8 +347,9 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     if args.pairs is not None and args.quick:
         ap.error("--pairs runs the pair cases alone: not with --quick")
-    global CLOCK
+    global CLOCK, COUNTER
     CLOCK = CLOCK or install_clock()
+    COUNTER = COUNTER or install_counter()
     effects = EFFECTS + LOOPS if args.effects == "all" else [e.strip() for e in args.effects.split(",")]
     seconds = args.seconds
     if args.lab:
@@ -289,6 +387,9 @@ def main(argv=None) -> dict:
                   f"validation fit {r['validation_fit_before']} -> {r['validation_fit_after']}", flush=True)
         print(f"{'':<24} cpu {r['cpu_seconds']:.1f} s, load {r['load_before']}; wall/cpu s: "
               + ", ".join(f"{p} {v['wall']:.1f}/{v['cpu']:.1f}" for p, v in r["phases"].items()), flush=True)
+        print(f"{'':<24} " + "; ".join(f"{k}: {v['calls']} calls, {v['samples']} samples"
+                                       + (f" ({v['sample_directions']} with directions)" if v["sample_directions"] else "")
+                                       + f", {v['seconds']:.1f} s" for k, v in r["integrations"].items()), flush=True)
         if not args.no_baseline:  # the same diagnosis with every hypothesis fitted jointly to convergence
             b = run_case(e, seconds, args.jobs, refit_top=0)
             r["baseline"] = {k: b[k] for k in ("seconds", "verdict", "effects", "correct", "validation_fit_after")}
@@ -304,7 +405,7 @@ def main(argv=None) -> dict:
            "cpu_seconds_per_case": round(sum(c["cpu_seconds"] for c in cases.values()) / len(cases), 2),
            "load_average_start": None if load_start is None else [round(v, 2) for v in load_start],
            "load_average_end": [round(v, 2) for v in os.getloadavg()] if hasattr(os, "getloadavg") else None,
-           "timed_functions": CLOCK.wrapped}
+           "timed_functions": CLOCK.wrapped, "counted_functions": COUNTER.wrapped}
     if args.pairs is not None:
         out.update(both_named_rate=sum(c["both_named"] for c in cases.values()) / len(cases),
                    one_named_rate=sum(c["one_named"] for c in cases.values()) / len(cases),

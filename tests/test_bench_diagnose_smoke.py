@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "diagnose.py"
@@ -73,3 +74,49 @@ def test_lab_pairs_are_lab_cases_of_the_random_pairs():
     assert {lab_protocols.parse_case(c)[0] for c in cases} == {"esa"}
     assert {lab_protocols.parse_case(c)[2] for c in cases} <= {500.0, 1000.0, 2000.0}
     assert all(bench._is_lab(c) for c in cases) and not bench._is_lab("charge_retention")
+
+
+def test_integration_counter_counts_simulations_and_sensitivities_in_forked_workers(monkeypatch):
+    """``install_counter``: every simulator run (in this process and in two forked workers) and every CVODES call
+    of a fit (plain, and with one sensitivity direction per free parameter) is counted with its samples."""
+    import importlib.util
+
+    import phs.workflows.identify.sensitivities as sens
+    from codegen import Simulator, simulate
+    from phs.workflows.diagnose.pool import run_forked
+    from phs.workflows.identify.solve import identify
+    from phs.workflows.recording import Recording
+    from systems.examples import rc_circuit
+
+    simulator = importlib.import_module("codegen.simulator")  # the module, not codegen's function
+    # the wrappers are removed after the test (monkeypatch restores what it set)
+    monkeypatch.setattr(simulator.Simulator, "run", simulator.Simulator.run)
+    monkeypatch.setattr(sens, "_integrate", sens._integrate)
+    monkeypatch.setattr(sens, "_integrate_sensitivities", sens._integrate_sensitivities)
+    spec = importlib.util.spec_from_file_location("bench_diagnose", SCRIPT)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    counter = bench.install_counter()
+    t = np.linspace(0.0, 0.01, 101)
+    run_forked(_simulated_samples, [(t,), (t,)], 2)
+    Simulator(rc_circuit(), energy=False).run(t, u={"U": 1.0})
+    sims = counter.read()["simulations"]
+    assert (sims["calls"], sims["samples"], sims["sample_directions"]) == (3, 303, 0)
+    assert sims["seconds"] > 0
+
+    counter.reset()
+    truth = rc_circuit().with_params({"R.R": 150.0})
+    y = simulate(truth, t, u={"U": 1.0})["v_C"]
+    rec = Recording.from_arrays(t, {"U": np.ones(t.size), "v_C": y})
+    identify(rc_circuit(), rec, ["R.R"], x0=[0.0])
+    got = counter.read()
+    plain, with_sens = got["fit integrations"], got["sensitivity integrations"]
+    assert plain["calls"] > 0 and with_sens["calls"] > 0
+    assert with_sens["sample_directions"] == with_sens["samples"]  # one free parameter: one direction
+
+
+def _simulated_samples(t):
+    from codegen import Simulator
+    from systems.examples import rc_circuit
+
+    return len(Simulator(rc_circuit(), energy=False).run(t, u={"U": 1.0}).t)
