@@ -1,6 +1,7 @@
 """A second effect behind the first (``phs.workflows.diagnose.run``): a next round runs when the accepted effect
 leaves a residual above the noise or a coloured one (either alone), and names a later effect only when it adds at least
-``LATER_SHARE`` of what the nominal model misses above the noise (``_adds_share``); one that would have been named
+``LATER_SHARE`` of what the nominal model misses above the noise, every channel it misses counted alike (``_adds_share``,
+``balanced_share``); one that would have been named
 without that rule is listed in ``verdict.small_share`` and in the explanation.
 
 On a concealed pair (charge retention in the dielectric and Coulomb friction on the plate, 4 s recordings of
@@ -49,8 +50,8 @@ def test_both_effects_of_a_concealed_pair_are_named(named, recordings):
     assert sorted(d.verdict["effects"]) == sorted(recordings[2]["effects"])
     second = d.accepted[1]
     # what it adds beyond the first, recorded when it was chosen, is the difference of the two explained shares
-    first_share = run.explained_share(d.nominal, d.accepted[0], d.data, d.noise)
-    both_share = run.explained_share(d.nominal, second, d.data, d.noise)
+    first_share = run.balanced_share(d.nominal, d.accepted[0], d.data, d.noise, run.RELEVANT)
+    both_share = run.balanced_share(d.nominal, second, d.data, d.noise, run.RELEVANT)
     assert second.later_share == pytest.approx(both_share - first_share, abs=1e-9)
     assert second.later_share >= run.LATER_SHARE and "small_share" not in d.verdict
 
@@ -59,7 +60,7 @@ def test_a_later_effect_below_the_share_is_not_named_and_the_verdict_says_so(nam
     # a share above what the second effect adds but below what the first leaves: the next round still runs
     # (something above the share is left), and the second effect is fitted but not named
     d = named
-    left = 1.0 - run.explained_share(d.nominal, d.accepted[0], d.data, d.noise)
+    left = 1.0 - run.balanced_share(d.nominal, d.accepted[0], d.data, d.noise, run.RELEVANT)
     adds = d.accepted[1].later_share
     assert left > adds + 0.01  # room for a share between the two (the first leaves more than the second explains)
     monkeypatch.setattr(run, "LATER_SHARE", 0.5 * (adds + left))
@@ -74,7 +75,7 @@ def test_a_later_effect_below_the_share_is_not_named_and_the_verdict_says_so(nam
 def test_no_next_round_when_less_than_the_share_is_left(named, recordings, monkeypatch):
     # a share above what the first effect leaves: no later effect could add it, so no second round is fitted
     d = named
-    left = 1.0 - run.explained_share(d.nominal, d.accepted[0], d.data, d.noise)
+    left = 1.0 - run.balanced_share(d.nominal, d.accepted[0], d.data, d.noise, run.RELEVANT)
     monkeypatch.setattr(run, "LATER_SHARE", left + 0.01)
     d2 = _diagnose(recordings)
     assert d2.verdict["effects"] == [d.verdict["effects"][0]] and len(d2.rounds) == 1 and "small_share" not in d2.verdict

@@ -7,7 +7,8 @@
   channel over its spread) against each fitted library hypothesis' signature: the cosine of the two,
   the best of them named when it reaches :data:`RESEMBLES`;
 * :func:`explained_share`: the validation-fit gain of a model against what remains above the noise
-  floor (the residual a perfect model would leave, from :func:`~phs.workflows.diagnose.mismatch.noise_level`).
+  floor (the residual a perfect model would leave, from :func:`~phs.workflows.diagnose.mismatch.noise_level`);
+  :func:`channel_shares` and :func:`balanced_share` the same per channel, and their mean.
 """
 
 from __future__ import annotations
@@ -65,6 +66,72 @@ def explained_share(reference, h, data, noise: dict) -> float:
     if not (math.isfinite(room) and room > 0 and math.isfinite(h.validation_rss)):
         return 0.0
     return float(np.clip((reference.validation_rss - h.validation_rss) / room, 0.0, 1.0))
+
+
+def channel_shares(reference, h, data, noise: dict, relevant: float = 0.0) -> dict:
+    """Per output channel, the share of what ``reference`` misses there above the channel's noise floor that
+    ``h`` explains: ``(RSS_ref − RSS_h) / (RSS_ref − n σ²)`` over the validation samples, within [−1, 1]
+    (negative where ``h`` misses more).  ``RSS`` from the validation fits (``validation_fit_percent``, NRMSE
+    over ``data.val_mask``), ``σ`` the channel's lowest noise floor as in :func:`explained_share`.  Only the
+    channels where ``reference`` misses something: its residual's RMS above
+    :data:`~phs.workflows.diagnose.mismatch.STRUCTURED` times ``σ`` and at least ``relevant`` of the channel's
+    standard deviation (a channel fitted to its noise has no room to share).
+
+    Each channel's share is its own, whatever the channels' weights: in :func:`explained_share` a channel the
+    reference misses badly (a capacitor's current at every step of a delayed command) outweighs one it
+    misses less (the position), and what a second effect explains of the position vanishes in the sum.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> t = np.linspace(0, 6, 1000)
+    >>> rng = np.random.default_rng(0)
+    >>> data = NS(validation={"a": np.sin(t) + 0.01 * rng.standard_normal(t.size),
+    ...                       "b": np.cos(3 * t) + 0.01 * rng.standard_normal(t.size)},
+    ...           val_mask=np.ones(t.size, bool), outputs=["a", "b"])
+    >>> ref = NS(validation_fit_percent={"a": 50.0, "b": 90.0})
+    >>> shares = channel_shares(ref, NS(validation_fit_percent={"a": 95.0, "b": 90.0}), data, {"a": 0.01, "b": 0.01})
+    >>> {ch: round(v, 3) for ch, v in shares.items()}
+    {'a': 0.991, 'b': 0.0}
+    >>> channel_shares(ref, NS(validation_fit_percent={"a": 50.0, "b": 99.6}), data, {"a": 0.01, "b": 0.01})["b"] > 0.9
+    True
+    """
+    from phs.workflows.diagnose.mismatch import STRUCTURED, noise_level
+
+    mask = np.asarray(data.val_mask, bool)
+    out = {}
+    for ch in data.outputs:
+        y = np.asarray(data.validation[ch], float)[mask]
+        spread = float(np.sum((y - y.mean()) ** 2)) if y.size else 0.0
+        fr = (getattr(reference, "validation_fit_percent", None) or {}).get(ch)
+        fh = (getattr(h, "validation_fit_percent", None) or {}).get(ch)
+        if not spread > 0 or fr is None or fh is None or not (math.isfinite(fr) and math.isfinite(fh)):
+            continue
+        rss_ref, rss_h = (1.0 - fr / 100.0) ** 2 * spread, (1.0 - fh / 100.0) ** 2 * spread
+        sigma = min([noise_level(y)] + [_residual_noise(m, ch, y, mask) for m in (reference, h)]) if noise.get(ch) else 0.0
+        rms = math.sqrt(rss_ref / y.size)
+        if not rms > STRUCTURED * sigma or rms < relevant * math.sqrt(spread / y.size):
+            continue
+        room = rss_ref - y.size * sigma**2
+        out[ch] = float(np.clip((rss_ref - rss_h) / room, -1.0, 1.0))
+    return out
+
+
+def balanced_share(reference, h, data, noise: dict, relevant: float = 0.0) -> float:
+    """The mean over channels of :func:`channel_shares`: what ``h`` explains of what ``reference`` misses, every
+    channel that misses something counted alike; 0 when none does.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> t = np.linspace(0, 6, 1000)
+    >>> data = NS(validation={"a": np.sin(t), "b": np.cos(3 * t)}, val_mask=np.ones(t.size, bool), outputs=["a", "b"])
+    >>> ref = NS(validation_fit_percent={"a": 50.0, "b": 90.0})
+    >>> round(balanced_share(ref, NS(validation_fit_percent={"a": 100.0, "b": 90.0}), data, {}), 3)
+    0.5
+    """
+    shares = channel_shares(reference, h, data, noise, relevant)
+    return float(np.mean(list(shares.values()))) if shares else 0.0
 
 
 def _residual_noise(model, ch, y, mask) -> float:
