@@ -5,7 +5,8 @@ lab-protocol Coulomb friction + hysteresis (``esa:coulomb_friction+hysteresis@1k
 hysteresis' state grew to 15 times its typical size and the integration at 1e-8 took its 20 000 steps
 within one output interval: the whole diagnosis ended in that error.  Here the failure is forced at the
 scores' tolerance on a mass-spring-damper (a real one needs a 10-minute diagnosis), and the trajectory
-returned must be the fit tolerance's, bit for bit."""
+returned must be the fit tolerance's, bit for bit.  Where both tolerances fail, the location reads the recorded
+inputs alone (with a warning) instead of ending the diagnosis."""
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ from codegen import Simulator, simulate
 from phs.errors import PHSError, SimulationError
 from phs.workflows.diagnose import hypotheses
 from phs.workflows.diagnose.hypotheses import Data, train_result
-from phs.workflows.diagnose.mismatch import _locate, noise_level
+from phs.workflows.diagnose.mismatch import _features, _locate, noise_level
 from phs.workflows.diagnose.nominal import fit_nominal
 from phs.workflows.recording import Recording
 from systems.examples import mass_spring_damper
@@ -65,3 +66,23 @@ def test_a_trajectory_that_fails_at_both_tolerances_raises_the_simulation_error(
     with pytest.raises(PHSError, match="forced"):
         train_result(nominal, data)
     nominal.simulated["train"] = None
+
+
+def test_a_location_whose_trajectory_fails_at_both_tolerances_reads_the_inputs_alone(fitted, monkeypatch):
+    # the next round's location of a model that cannot be integrated at all: a warning, and the mismatch located
+    # against the recorded inputs alone (the same findings of the residual's whiteness as with the model's signals)
+    nominal, data = fitted
+    noise = {"position": noise_level(data.recording["position"])}
+    with_model = _locate(nominal, nominal.system, data, noise)
+    nominal.simulated["train"] = None
+    _failing_at_the_scores_tolerance(monkeypatch, also_at_the_fits=True)
+    with pytest.warns(RuntimeWarning, match="located against the recorded inputs alone"):
+        alone = _locate(nominal, nominal.system, data, noise)
+    nominal.simulated["train"] = None
+    assert not any(s in f.where for f in alone for s in nominal.system.state_names)  # no model signal read
+    with pytest.warns(RuntimeWarning):
+        feats, inputs = _features(nominal, nominal.system, data)
+    nominal.simulated["train"] = None
+    assert feats == {} and list(inputs) == ["F"] and np.array_equal(inputs["F"], data.recording["F"])
+    white = [(f.kind, f.where, f.details.get("significant")) for f in with_model if f.kind == "whiteness"]
+    assert white and white == [(f.kind, f.where, f.details.get("significant")) for f in alone if f.kind == "whiteness"]

@@ -53,11 +53,22 @@ def median_noise(y) -> float:
 
 def _features(scored, system, data) -> tuple[dict, dict]:
     """Model signals along the training recording for locating: states, velocities (``v:`` + momentum
-    state), inputs; and the inputs separately."""
+    state), inputs; and the inputs separately.  Where the model cannot be integrated along the recording at
+    either tolerance (:func:`~phs.workflows.diagnose.hypotheses.train_result`), no model signal and the
+    recorded inputs, with a warning: the mismatch is then located against the inputs alone (when, at which
+    input's steps, at which frequencies, whether it is white), and the diagnosis goes on."""
+    import warnings
+
     from components.candidates import momentum_states
+    from phs.errors import PHSError
     from phs.workflows.diagnose.hypotheses import train_result
 
-    res = train_result(scored, data)
+    try:
+        res = train_result(scored, data)
+    except PHSError as err:
+        warnings.warn(f"diagnose: {scored.label} cannot be integrated along the training recording ({err}); its mismatch "
+                      "is located against the recorded inputs alone", RuntimeWarning, stacklevel=3)
+        return {}, {n: np.asarray(data.recording[n], float) for n in system.input_names if n in data.recording.signals}
     feats = {name: np.asarray(res[name]) for name in system.state_names}
     inputs = {name: np.asarray(res[name]) for name in system.input_names}
     if momentum_states(system):
