@@ -55,7 +55,7 @@ outside: the bench wraps functions of :mod:`phs.workflows.diagnose` with timers 
 workers): ``simulations`` (the simulator's runs: scores, element searches, locations), ``fit integrations``
 (a fit's residual, one CVODES call per segment) and ``sensitivity integrations`` (a fit's Jacobian: the same
 with a forward-sensitivity direction per free parameter), each with its ``calls``, ``samples``,
-``sample_directions`` (samples times directions) and ``seconds`` (summed over processes, like CPU seconds).
+``sample_directions`` (samples times directions) and ``seconds`` (CPU seconds inside the calls, summed over processes).
 
 ``--lab`` runs the lab-protocol recordings of :mod:`examples.lab_protocols` instead (17 s by default:
 rests, smooth-edged and held squares, staircases, chirp bursts, PRBS, at 500 Hz to 2 kHz; the
@@ -170,9 +170,10 @@ direction per free parameter and estimated initial state)."""
 
 
 class IntegrationCounter:
-    """Calls, samples, sample-directions and seconds of the integrations (:data:`INTEGRATIONS`), summed over
+    """Calls, samples, sample-directions and CPU seconds of the integrations (:data:`INTEGRATIONS`), summed over
     this process and the workers it forks (counters in shared memory made before any fork; a forked worker
-    adds to them).  The seconds are summed over processes: compare them with the case's CPU seconds."""
+    adds to them).  The seconds are each process's CPU time inside the calls (``time.process_time``), summed:
+    a share of the case's CPU seconds, whatever else runs on the machine."""
 
     FIELDS = ("calls", "samples", "directions", "seconds")
 
@@ -218,29 +219,29 @@ def install_counter() -> IntegrationCounter:
     run = simulator.Simulator.run
     if not getattr(run, "_bench_count", False):
         def counted_run(self, t, *a, **k):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             try:
                 return run(self, t, *a, **k)
             finally:
-                counter.add("simulations", len(np.atleast_1d(t)), 0, time.perf_counter() - t0)
+                counter.add("simulations", len(np.atleast_1d(t)), 0, time.process_time() - t0)
         counted_run._bench_count = True
         simulator.Simulator.run = counted_run
         counter.wrapped.append("codegen.simulator.Simulator.run")
     plain, with_sens = sens._integrate, sens._integrate_sensitivities
     if not getattr(plain, "_bench_count", False):
         def counted_plain(F, z0, P, nx, n):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             try:
                 return plain(F, z0, P, nx, n)
             finally:
-                counter.add("fit integrations", n, 0, time.perf_counter() - t0)
+                counter.add("fit integrations", n, 0, time.process_time() - t0)
 
         def counted_sens(Fs, z0, S0, P, seed_p, n):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             try:
                 return with_sens(Fs, z0, S0, P, seed_p, n)
             finally:
-                counter.add("sensitivity integrations", n, int(np.shape(seed_p)[0]), time.perf_counter() - t0)
+                counter.add("sensitivity integrations", n, int(np.shape(seed_p)[0]), time.process_time() - t0)
         counted_plain._bench_count = counted_sens._bench_count = True
         sens._integrate, sens._integrate_sensitivities = counted_plain, counted_sens
         counter.wrapped += ["phs.workflows.identify.sensitivities._integrate",
